@@ -1,0 +1,207 @@
+//! The weight blob: one self-checking file that carries the learned networks to the firmware.
+//!
+//! Layout (all integers little-endian):
+//!
+//! | offset | size | field |
+//! | --- | --- | --- |
+//! | 0 | 4 | magic `b"HMFW"` |
+//! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
+//! | 6 | 18 | network shapes: J⁻¹, g, W, each `[inputs, hidden, outputs]` as u16 |
+//! | 24 | 4 | body length in bytes |
+//! | 28 | n | body: [`ModelWeights`] in postcard (every parameter an f32, layer by layer) |
+//! | 28 + n | 4 | CRC-32 (IEEE 802.3) of the body |
+//!
+//! [`decode`] checks each field in that order and returns the first failure as a [`BlobError`];
+//! it never panics and never returns a partly loaded model.
+
+use crate::model::ModelWeights;
+
+/// The blob's first four bytes.
+pub const MAGIC: [u8; 4] = *b"HMFW";
+/// The format version this build reads and writes.
+pub const FORMAT_VERSION: u16 = 1;
+/// Size of the fixed header before the body.
+pub const HEADER_LEN: usize = 28;
+/// Size of the trailing checksum.
+pub const CRC_LEN: usize = 4;
+
+/// Why a blob was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BlobError {
+    /// Shorter than its header says (or than a header).
+    Truncated,
+    /// The first four bytes are not `HMFW`: not a hamflight weight blob.
+    BadMagic,
+    /// Written by a format version this build cannot read.
+    UnsupportedVersion(u16),
+    /// The network shapes in the header differ from the ones this build was compiled for.
+    ShapeMismatch,
+    /// The body's CRC-32 does not match: the file is corrupt.
+    Checksum,
+    /// Bytes follow the checksum.
+    TrailingBytes,
+    /// The body passed its checksum but is not a valid encoding of the networks.
+    Malformed,
+    /// A parameter is NaN or infinite.
+    NonFinite,
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Truncated => f.write_str("weight blob is truncated"),
+            Self::BadMagic => f.write_str("not a hamflight weight blob (bad magic)"),
+            Self::UnsupportedVersion(v) => write!(
+                f,
+                "weight blob format version {v} is not supported (this build reads {FORMAT_VERSION})"
+            ),
+            Self::ShapeMismatch => {
+                f.write_str("weight blob network shapes differ from this build's networks")
+            }
+            Self::Checksum => f.write_str("weight blob checksum mismatch (corrupt file)"),
+            Self::TrailingBytes => f.write_str("weight blob has bytes after its checksum"),
+            Self::Malformed => f.write_str("weight blob body is malformed"),
+            Self::NonFinite => f.write_str("weight blob holds a NaN or infinite parameter"),
+        }
+    }
+}
+
+impl core::error::Error for BlobError {}
+
+/// The header bytes this build writes and expects (magic, version, shapes), without the length.
+fn expected_prefix() -> [u8; 24] {
+    let mut out = [0u8; 24];
+    let mut fields = MAGIC
+        .into_iter()
+        .chain(FORMAT_VERSION.to_le_bytes())
+        .chain(
+            ModelWeights::DIMS
+                .into_iter()
+                .flatten()
+                .flat_map(u16::to_le_bytes),
+        );
+    for b in out.iter_mut() {
+        *b = fields.next().unwrap_or(0);
+    }
+    out
+}
+
+fn le_u16(b: &[u8]) -> Option<u16> {
+    Some(u16::from_le_bytes(b.get(..2)?.try_into().ok()?))
+}
+
+fn le_u32(b: &[u8]) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(..4)?.try_into().ok()?))
+}
+
+/// Decodes and checks a weight blob.
+///
+/// # Errors
+/// The first failed check, in file order: [`BlobError::Truncated`] (shorter than the header),
+/// [`BlobError::BadMagic`], [`BlobError::UnsupportedVersion`], [`BlobError::ShapeMismatch`],
+/// [`BlobError::Truncated`] / [`BlobError::TrailingBytes`] (length disagrees with the header),
+/// [`BlobError::Checksum`], [`BlobError::Malformed`], [`BlobError::NonFinite`].
+pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
+    let prefix = expected_prefix();
+    let magic = bytes.get(..4).ok_or(BlobError::Truncated)?;
+    if magic != MAGIC {
+        return Err(BlobError::BadMagic);
+    }
+    let version = bytes
+        .get(4..)
+        .and_then(le_u16)
+        .ok_or(BlobError::Truncated)?;
+    if version != FORMAT_VERSION {
+        return Err(BlobError::UnsupportedVersion(version));
+    }
+    let shapes = bytes.get(6..24).ok_or(BlobError::Truncated)?;
+    if Some(shapes) != prefix.get(6..24) {
+        return Err(BlobError::ShapeMismatch);
+    }
+    let body_len = bytes
+        .get(24..)
+        .and_then(le_u32)
+        .ok_or(BlobError::Truncated)? as usize;
+    let total = HEADER_LEN
+        .checked_add(body_len)
+        .and_then(|n| n.checked_add(CRC_LEN))
+        .ok_or(BlobError::Truncated)?;
+    if bytes.len() < total {
+        return Err(BlobError::Truncated);
+    }
+    if bytes.len() > total {
+        return Err(BlobError::TrailingBytes);
+    }
+    let body = bytes
+        .get(HEADER_LEN..HEADER_LEN + body_len)
+        .ok_or(BlobError::Truncated)?;
+    let stored_crc = bytes
+        .get(HEADER_LEN + body_len..)
+        .and_then(le_u32)
+        .ok_or(BlobError::Truncated)?;
+    if crc32(body) != stored_crc {
+        return Err(BlobError::Checksum);
+    }
+    let (weights, rest) =
+        postcard::take_from_bytes::<ModelWeights>(body).map_err(|_| BlobError::Malformed)?;
+    if !rest.is_empty() {
+        return Err(BlobError::Malformed);
+    }
+    if !weights.is_finite() {
+        return Err(BlobError::NonFinite);
+    }
+    Ok(weights)
+}
+
+/// Encodes weights as a blob (host side).
+#[cfg(feature = "std")]
+pub fn encode(weights: &ModelWeights) -> Vec<u8> {
+    // Serializing plain f32 tuples into a Vec cannot fail.
+    let body = postcard::to_stdvec(weights).unwrap_or_default();
+    let mut out = Vec::with_capacity(HEADER_LEN + body.len() + CRC_LEN);
+    out.extend_from_slice(&expected_prefix());
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&body);
+    out.extend_from_slice(&crc32(&body).to_le_bytes());
+    out
+}
+
+const CRC_TABLE: [u32; 256] = {
+    let mut table = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 8 {
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+            k += 1;
+        }
+        table[i] = c;
+        i += 1;
+    }
+    table
+};
+
+/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, as zlib and PNG use).
+pub fn crc32(data: &[u8]) -> u32 {
+    !data.iter().fold(!0u32, |c, &b| {
+        let idx = ((c ^ b as u32) & 0xFF) as usize;
+        CRC_TABLE.get(idx).copied().unwrap_or(0) ^ (c >> 8)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_check_value() {
+        // The standard check value of CRC-32/ISO-HDLC.
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+}

@@ -1,0 +1,26 @@
+//! # hamflight — the flight core
+//!
+//! A `no_std`, allocation-free, f32 implementation of "Physics-guided Learning-based Adaptive
+//! Control on the SE(3) Manifold" (Duong & Atanasov) for Crazyflie-class quadrotors: fixed-size
+//! inference of the learned port-Hamiltonian model, the energy-based (IDA-PBC) tracking controller
+//! and the disturbance adaptation law.
+//!
+//! Data flows one way: state + setpoint → controller → wrench → mixer → motors.
+//!
+//! Modules:
+//! - [`lie`]: SO(3) hat/vee, exp/log, rotation error;
+//! - [`nn`]: const-generic dense layers and MLPs with their input Jacobians;
+//! - [`model`]: the learned Hamiltonian model's networks;
+//! - [`reference`]: setpoints and the desired attitude from differential flatness;
+//! - [`blob`]: the checked weight-blob codec.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![deny(missing_docs)]
+
+pub mod blob;
+pub mod lie;
+pub mod model;
+pub mod nn;
+pub mod reference;
+
+pub use model::State;
+pub use reference::Setpoint;
