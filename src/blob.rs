@@ -72,15 +72,12 @@ impl core::error::Error for BlobError {}
 /// The header bytes this build writes and expects (magic, version, shapes), without the length.
 fn expected_prefix() -> [u8; 24] {
     let mut out = [0u8; 24];
-    let mut fields = MAGIC
-        .into_iter()
-        .chain(FORMAT_VERSION.to_le_bytes())
-        .chain(
-            ModelWeights::DIMS
-                .into_iter()
-                .flatten()
-                .flat_map(u16::to_le_bytes),
-        );
+    let mut fields = MAGIC.into_iter().chain(FORMAT_VERSION.to_le_bytes()).chain(
+        ModelWeights::DIMS
+            .into_iter()
+            .flatten()
+            .flat_map(u16::to_le_bytes),
+    );
     for b in out.iter_mut() {
         *b = fields.next().unwrap_or(0);
     }

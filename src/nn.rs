@@ -206,7 +206,13 @@ impl<'de, const I: usize, const O: usize> Visitor<'de> for DenseVisitor<I, O> {
     type Value = Dense<I, O>;
 
     fn expecting(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
-        write!(f, "{} f32 values of a {}x{} dense layer", Dense::<I, O>::PARAMS, O, I)
+        write!(
+            f,
+            "{} f32 values of a {}x{} dense layer",
+            Dense::<I, O>::PARAMS,
+            O,
+            I
+        )
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {

@@ -3,10 +3,40 @@
 //! networks give J⁻¹(q), the input gain g(q) and the disturbance features W(q, 𝔭).
 
 use crate::nn::Mlp;
+use nalgebra::{Matrix3, SMatrix};
 use serde::{Deserialize, Serialize};
 
+mod nominal;
 mod state;
+pub use nominal::{true_input_gain, NominalModel, NOMINAL_TORQUE_FEATURE_NM};
 pub use state::State;
+
+/// The vehicle's mass (kg), known (paper Sec. 4).
+pub const MASS_KG: f32 = 0.027;
+/// Gravitational acceleration (m/s²), as in the SITL plant and gym-pybullet-drones.
+pub const GRAVITY_M_S2: f32 = 9.8;
+
+/// What the controller needs of a model at one state, evaluated once per control step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelTerms {
+    /// Mass m (kg): M = diag(m I, J).
+    pub mass_kg: f32,
+    /// Gravity (m/s²) in V(q) = m g e₃ᵀ p.
+    pub gravity_m_s2: f32,
+    /// J⁻¹(q) (1/(kg·m²)), body frame.
+    pub inertia_inv: Matrix3<f32>,
+    /// The input gain g(q) ∈ ℝ⁶ˣ⁴: rows body force x, y, z then torque x, y, z; columns u = [f; τ].
+    pub gain: SMatrix<f32, 6, 4>,
+    /// The disturbance features W(q, 𝔭) ∈ ℝ⁶ˣᵖ (N and N·m per unit of a): d = W a.
+    pub features: SMatrix<f32, 6, FEATURES>,
+}
+
+/// A port-Hamiltonian model of the vehicle (paper eq. 1): learned
+/// or nominal ([`NominalModel`]). The controller is written against this trait.
+pub trait HamiltonianModel {
+    /// M⁻¹, g and W at `state`.
+    fn terms(&self, state: &State) -> ModelTerms;
+}
 
 /// Width of every hidden layer. A performance knob: the whole control step must fit the MCU budget.
 pub const HIDDEN: usize = 16;
