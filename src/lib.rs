@@ -12,15 +12,23 @@
 //! - [`nn`]: const-generic dense layers and MLPs with their input Jacobians;
 //! - [`model`]: the learned Hamiltonian model's networks;
 //! - [`reference`]: setpoints and the desired attitude from differential flatness;
+//! - [`control`]: the IDA-PBC tracking law and the [`FlightController`];
+//! - [`adapt`]: the disturbance adaptation law;
+//! - [`mixer`]: wrench to rotor commands with saturation;
 //! - [`blob`]: the checked weight-blob codec.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(missing_docs)]
 
+pub mod adapt;
 pub mod blob;
+pub mod control;
 pub mod lie;
+pub mod mixer;
 pub mod model;
 pub mod nn;
 pub mod reference;
 
+pub use control::{Faults, FlightController, Gains, Output};
+pub use mixer::{RotorCommand, Wrench};
 pub use model::State;
 pub use reference::Setpoint;

@@ -48,3 +48,68 @@ impl Setpoint {
             && self.yaw_rate_rad_s.is_finite()
     }
 }
+
+/// The desired attitude R* and body rate ω* of the reference frame (Lee et al. 2010, as the
+/// paper's Sec. 4 constructs them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttitudeReference {
+    /// R* = [b₁*, b₂*, b₃*] (body → world).
+    pub rot: nalgebra::Matrix3<f32>,
+    /// ω* = (R*ᵀ Ṙ*)^∨, the reference frame's body rate (rad/s).
+    pub w_rad_s: Vector3<f32>,
+    /// The tilt limit (or a non-upward force) changed b₃*.
+    pub tilt_limited: bool,
+}
+
+/// R* and ω* from the desired world force `f_w` (N) with its rate `f_dot_w` (N/s) and the yaw.
+///
+/// b₃* = F/‖F‖ (tilted at most `max_tilt_rad` from world z; a force with no upward component
+/// gives b₃* = e₃), b₁c = [cos ψ*, sin ψ*, 0], b₂* = b₃* × b₁c / ‖·‖, b₁* = b₂* × b₃*. The rates
+/// differentiate these products exactly given Ḟ; while the tilt limit is active ḃ₃* is taken as
+/// zero.
+pub fn desired_attitude(
+    f_w: &Vector3<f32>,
+    f_dot_w: &Vector3<f32>,
+    yaw_rad: f32,
+    yaw_rate_rad_s: f32,
+    max_tilt_rad: f32,
+) -> AttitudeReference {
+    let e3 = Vector3::z();
+    let n = f_w.norm();
+    let cos_max = libm::cosf(max_tilt_rad);
+    let (b3, b3_dot, tilt_limited) = if !(n > 1e-6) || !n.is_finite() || f_w.z <= 0.0 {
+        (e3, Vector3::zeros(), true)
+    } else {
+        let b3 = f_w / n;
+        if b3.z >= cos_max {
+            let b3_dot = (f_dot_w - b3 * b3.dot(f_dot_w)) / n;
+            (b3, b3_dot, false)
+        } else {
+            let horiz = Vector3::new(b3.x, b3.y, 0.0);
+            let hn = horiz.norm();
+            let dir = if hn > 1e-9 { horiz / hn } else { Vector3::x() };
+            let b3 = e3 * cos_max + dir * libm::sinf(max_tilt_rad);
+            (b3, Vector3::zeros(), true)
+        }
+    };
+    let (s, c) = (libm::sinf(yaw_rad), libm::cosf(yaw_rad));
+    let b1c = Vector3::new(c, s, 0.0);
+    let b1c_dot = Vector3::new(-s, c, 0.0) * yaw_rate_rad_s;
+    let cvec = b3.cross(&b1c);
+    let cn = cvec.norm();
+    // |b₃ × b₁c| ≥ cos(max tilt) > 0 because b₁c is horizontal.
+    let cn = if cn > 1e-6 { cn } else { 1e-6 };
+    let b2 = cvec / cn;
+    let c_dot = b3_dot.cross(&b1c) + b3.cross(&b1c_dot);
+    let b2_dot = (c_dot - b2 * b2.dot(&c_dot)) / cn;
+    let b1 = b2.cross(&b3);
+    let b1_dot = b2_dot.cross(&b3) + b2.cross(&b3_dot);
+    let rot = nalgebra::Matrix3::from_columns(&[b1, b2, b3]);
+    let rot_dot = nalgebra::Matrix3::from_columns(&[b1_dot, b2_dot, b3_dot]);
+    let w_rad_s = crate::lie::vee(&(rot.transpose() * rot_dot));
+    AttitudeReference {
+        rot,
+        w_rad_s,
+        tilt_limited,
+    }
+}
