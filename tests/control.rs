@@ -1,0 +1,104 @@
+//! The flight controller's safety properties on the host: finite output for any finite state,
+//! motors off and a fault flag for non-finite input, and the mixer's limits.
+
+use hamflight::mixer::Airframe;
+use hamflight::model::NominalModel;
+use hamflight::{FlightController, Gains, RotorCommand, Setpoint, State};
+use nalgebra::{Matrix3, Vector3};
+use proptest::prelude::*;
+
+fn vec3(scale: f32) -> impl Strategy<Value = Vector3<f32>> {
+    prop::array::uniform3(-scale..scale).prop_map(Vector3::from)
+}
+
+fn rotation() -> impl Strategy<Value = Matrix3<f32>> {
+    vec3(3.2).prop_map(|phi| hamflight::lie::exp(&phi))
+}
+
+fn state() -> impl Strategy<Value = State> {
+    (vec3(5.0), rotation(), vec3(5.0), vec3(20.0)).prop_map(|(p, r, v, w)| State {
+        p_m: p,
+        rot: r,
+        v_body_m_s: v,
+        w_body_rad_s: w,
+    })
+}
+
+fn setpoint() -> impl Strategy<Value = Setpoint> {
+    (vec3(5.0), vec3(3.0), vec3(10.0), vec3(30.0), -3.2f32..3.2, -2.0f32..2.0).prop_map(
+        |(p, v, a, j, yaw, yaw_rate)| Setpoint {
+            p_m: p,
+            v_m_s: v,
+            a_m_s2: a,
+            j_m_s3: j,
+            yaw_rad: yaw,
+            yaw_rate_rad_s: yaw_rate,
+        },
+    )
+}
+
+proptest! {
+    #[test]
+    fn output_is_finite_and_within_rotor_limits(s in state(), sp in setpoint(), steps in 1usize..20) {
+        let mut fc = FlightController::new(NominalModel::default(), Gains::default());
+        let max_t = Airframe::default().max_rotor_thrust_n();
+        for _ in 0..steps {
+            let out = fc.step(&s, &sp, 0.002);
+            prop_assert!(!out.faults.is_fault());
+            prop_assert!(out.rotors.thrust_n.iter().chain(out.rotors.rpm.iter()).all(|x| x.is_finite()));
+            prop_assert!(out.rotors.thrust_n.iter().all(|t| *t >= 0.0 && *t <= max_t * (1.0 + 1e-6)));
+            prop_assert!(out.a.iter().all(|x| x.is_finite()));
+            prop_assert!(out.a.norm() <= fc.gains.rates.a_max * (1.0 + 1e-5));
+        }
+    }
+}
+
+#[test]
+fn non_finite_inputs_give_motors_off_and_a_fault() {
+    let mut fc = FlightController::new(NominalModel::default(), Gains::default());
+    let good = State {
+        p_m: Vector3::new(0.0, 0.0, 1.0),
+        ..State::default()
+    };
+    let sp = Setpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0);
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let mut s = good;
+        s.rot.m12 = bad;
+        let out = fc.step(&s, &sp, 0.002);
+        assert!(out.faults.bad_state && out.faults.is_fault());
+        assert_eq!(out.rotors, RotorCommand::OFF);
+
+        let mut s = good;
+        s.w_body_rad_s.z = bad;
+        assert_eq!(fc.step(&s, &sp, 0.002).rotors, RotorCommand::OFF);
+
+        let mut p = sp;
+        p.j_m_s3.y = bad;
+        let out = fc.step(&good, &p, 0.002);
+        assert!(out.faults.bad_setpoint);
+        assert_eq!(out.rotors, RotorCommand::OFF);
+
+        let out = fc.step(&good, &sp, bad);
+        assert!(out.faults.bad_dt);
+        assert_eq!(out.rotors, RotorCommand::OFF);
+    }
+    for dt in [0.0, -0.002, 0.5] {
+        assert!(fc.step(&good, &sp, dt).faults.bad_dt);
+    }
+    // After the faults, a good input flies again, and the estimate was not corrupted.
+    let out = fc.step(&good, &sp, 0.002);
+    assert!(!out.faults.is_fault());
+    assert!(out.a.iter().all(|x| x.is_finite()));
+    let hover = 0.027 * 9.8;
+    let total: f32 = out.rotors.thrust_n.iter().sum();
+    assert!((total - hover).abs() < 1e-3 * hover, "hover thrust {total} vs {hover}");
+}
+
+#[test]
+fn default_gains_are_pinned() {
+    let g = Gains::default();
+    assert_eq!((g.k_p, g.k_v), (0.135, 0.0675), "the paper's translational gains");
+    assert_eq!((g.k_r, g.k_w), (0.007, 0.00115), "crazyflie-firmware's Lee gains");
+    let p = Gains::paper();
+    assert_eq!((p.k_r, p.k_w, p.rates.c_p, p.rates.c_r), (1.0, 0.08, 0.04, 0.5));
+}
