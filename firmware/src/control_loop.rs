@@ -1,0 +1,242 @@
+//! The control loop, independent of the chip: the latest input from the link, one
+//! [`FlightController::step`] per timer tick, the PWM map, the watchdog and the statistics.
+//!
+//! A tick steps the controller only when a fresh input arrived since the previous tick (a state
+//! is never used twice, so the adaptation law integrates each measurement once). Without fresh
+//! input the motors hold their last command until the watchdog runs out: no valid state for
+//! [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate is
+//! kept).
+
+use crate::link::{Input, LinkStatus, Report, Telemetry};
+use crate::motor::{rpm_to_pwm, Motors};
+use embedded_hal::pwm::SetDutyCycle;
+use hamflight::blob::BlobError;
+use hamflight::model::HamiltonianModel;
+use hamflight::{FlightController, Gains, Setpoint, State};
+
+/// Control-loop rate (Hz): 500, or 1000 with the `loop-1khz` feature.
+pub const LOOP_HZ: u32 = if cfg!(feature = "loop-1khz") {
+    1000
+} else {
+    500
+};
+/// The controller's time step (s).
+pub const DT_S: f32 = 1.0 / LOOP_HZ as f32;
+/// Motors off when no valid state arrived for this long (ms).
+pub const WATCHDOG_MS: u32 = 50;
+/// [`WATCHDOG_MS`] in control ticks (rounded up).
+pub const WATCHDOG_TICKS: u32 = (WATCHDOG_MS * LOOP_HZ).div_ceil(1000);
+
+/// The model the firmware flies.
+///
+/// Interim: the nominal model, with the blob decoded and checked at boot all the same (a bad
+/// blob keeps the motors off); becomes `LearnedModel` when it lands in the core.
+pub type Model = hamflight::model::NominalModel;
+
+/// Decodes and checks the weight blob and builds the model.
+///
+/// # Errors
+/// The blob's first failed check ([`BlobError`]).
+pub fn load_model(blob: &[u8]) -> Result<Model, BlobError> {
+    hamflight::blob::decode(blob).map(|_| Model::default())
+}
+
+/// Counts ticks without a valid state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Watchdog {
+    ticks_since_valid: u32,
+    timeout_ticks: u32,
+    tripped: bool,
+    trips: u32,
+}
+
+impl Watchdog {
+    /// A watchdog that trips after `timeout_ticks` ticks without [`Watchdog::feed`]; it starts
+    /// tripped-free but with no state seen.
+    pub const fn new(timeout_ticks: u32) -> Self {
+        Self {
+            ticks_since_valid: 0,
+            timeout_ticks,
+            tripped: false,
+            trips: 0,
+        }
+    }
+
+    /// A valid state arrived.
+    pub fn feed(&mut self) {
+        self.ticks_since_valid = 0;
+        self.tripped = false;
+    }
+
+    /// One tick without a valid state; true exactly on the tick that trips it.
+    pub fn starve(&mut self) -> bool {
+        self.ticks_since_valid = self.ticks_since_valid.saturating_add(1);
+        if !self.tripped && self.ticks_since_valid >= self.timeout_ticks {
+            self.tripped = true;
+            self.trips += 1;
+            return true;
+        }
+        false
+    }
+
+    /// True while tripped (motors must be off).
+    pub fn tripped(&self) -> bool {
+        self.tripped
+    }
+
+    /// Trips so far.
+    pub fn trips(&self) -> u32 {
+        self.trips
+    }
+}
+
+/// Measures the cost of a step with a free-running counter.
+pub trait CostCounter {
+    /// The counter now.
+    fn now(&mut self) -> u32;
+    /// Ticks from `start` to now (handles wrap-around and down-counters).
+    fn since(&mut self, start: u32) -> u32;
+}
+
+/// A counter that measures nothing (host tests).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoCost;
+
+impl CostCounter for NoCost {
+    fn now(&mut self) -> u32 {
+        0
+    }
+    fn since(&mut self, _start: u32) -> u32 {
+        0
+    }
+}
+
+/// What a tick did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TickOutcome {
+    /// The controller ran; send this telemetry.
+    Stepped(Telemetry),
+    /// The motors went off without a step (first tick of that condition); report it.
+    Stopped(LinkStatus),
+    /// Nothing new.
+    Idle,
+}
+
+/// The chip-independent control loop.
+pub struct ControlLoop<M> {
+    controller: Result<FlightController<M>, BlobError>,
+    latest: Option<Input>,
+    watchdog: Watchdog,
+    status: LinkStatus,
+    steps: u32,
+    max_cost: u32,
+    min_cost: u32,
+}
+
+impl<M: HamiltonianModel> ControlLoop<M> {
+    /// A loop on `model` (or on the reason the model could not be loaded: then the motors stay
+    /// off) with the core's default gains.
+    pub fn new(model: Result<M, BlobError>) -> Self {
+        let status = if model.is_ok() {
+            LinkStatus::WaitingForState
+        } else {
+            LinkStatus::BadBlob
+        };
+        Self {
+            controller: model.map(|m| FlightController::new(m, Gains::default())),
+            latest: None,
+            watchdog: Watchdog::new(WATCHDOG_TICKS),
+            status,
+            steps: 0,
+            max_cost: 0,
+            min_cost: u32::MAX,
+        }
+    }
+
+    /// The blob check's result.
+    pub fn blob_error(&self) -> Option<BlobError> {
+        self.controller.as_ref().err().copied()
+    }
+
+    /// Why the motors are off, or `Running`.
+    pub fn status(&self) -> LinkStatus {
+        self.status
+    }
+
+    /// A new input from the link; the next tick uses it.
+    pub fn on_input(&mut self, input: Input) {
+        self.latest = Some(input);
+    }
+
+    /// One timer tick: step on fresh input, else hold or stop the motors.
+    pub fn tick<A, B, C, D, K>(
+        &mut self,
+        motors: &mut Motors<A, B, C, D>,
+        cost: &mut K,
+    ) -> TickOutcome
+    where
+        A: SetDutyCycle,
+        B: SetDutyCycle,
+        C: SetDutyCycle,
+        D: SetDutyCycle,
+        K: CostCounter,
+    {
+        let controller = match self.controller.as_mut() {
+            Ok(c) => c,
+            Err(_) => {
+                motors.off();
+                self.latest = None;
+                return TickOutcome::Idle;
+            }
+        };
+        let Some(input) = self.latest.take() else {
+            if self.watchdog.starve() {
+                motors.off();
+                self.status = LinkStatus::WatchdogTripped;
+                return TickOutcome::Stopped(self.status);
+            }
+            if self.watchdog.tripped() || self.status == LinkStatus::WaitingForState {
+                motors.off();
+            }
+            return TickOutcome::Idle;
+        };
+
+        let start = cost.now();
+        let state = State::from(&input.state);
+        let setpoint = Setpoint::from(&input.setpoint);
+        let out = controller.step(&state, &setpoint, DT_S);
+        let mut pwm = out.rotors.rpm.map(rpm_to_pwm);
+        if motors.set(pwm).is_err() {
+            pwm = [0; 4];
+        }
+        let spent = cost.since(start);
+
+        if out.faults.bad_state {
+            // Not a valid state: it does not feed the watchdog (the step already gave motors off).
+            if self.watchdog.starve() {
+                self.status = LinkStatus::WatchdogTripped;
+            }
+        } else {
+            self.watchdog.feed();
+            self.status = LinkStatus::Running;
+        }
+        self.steps = self.steps.wrapping_add(1);
+        self.max_cost = self.max_cost.max(spent);
+        self.min_cost = self.min_cost.min(spent);
+        let mut t = Telemetry::from_output(input.seq, &out, pwm);
+        t.step_cost = spent;
+        t.watchdog_trips = self.watchdog.trips();
+        TickOutcome::Stepped(t)
+    }
+
+    /// Statistics so far (stack and frame counts are filled in by the caller).
+    pub fn report(&self) -> Report {
+        Report {
+            steps: self.steps,
+            max_step_cost: self.max_cost,
+            min_step_cost: if self.steps == 0 { 0 } else { self.min_cost },
+            watchdog_trips: self.watchdog.trips(),
+            ..Report::default()
+        }
+    }
+}

@@ -1,0 +1,436 @@
+//! The UART link: state and setpoint in, telemetry out.
+//!
+//! Every message is a postcard-encoded [`Uplink`] or [`Downlink`], followed by the CRC-32
+//! (IEEE 802.3, as [`hamflight::blob::crc32`], little-endian) of those bytes, COBS-encoded and
+//! terminated by a zero byte:
+//!
+//! ```text
+//! frame = COBS( postcard(msg) ‖ crc32_le(postcard(msg)) ) ‖ 0x00
+//! ```
+//!
+//! A frame that fails COBS, the CRC or postcard is counted and dropped ([`FrameError`]); the
+//! decoder resynchronises at the next zero byte.
+//!
+//! This file is also compiled into the host's processor-in-the-loop test
+//! (`host-train/tests/pil_qemu.rs` includes it with `#[path]`), so both ends encode and decode
+//! exactly the same bytes. It therefore depends only on `core`, `serde`, `postcard`,
+//! `nalgebra` and `hamflight`.
+
+use hamflight::{Faults, Output, Setpoint, State};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Largest encoded frame (COBS overhead, CRC and delimiter included).
+pub const MAX_FRAME: usize = 256;
+/// Largest postcard payload of one message.
+pub const MAX_PAYLOAD: usize = MAX_FRAME - 8;
+
+/// The vehicle state on the wire (f32, SI units, the core's conventions).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WireState {
+    /// Position p (m, world).
+    pub p: [f32; 3],
+    /// Attitude R (body → world), row-major.
+    pub rot: [f32; 9],
+    /// Linear velocity v (m/s, body frame).
+    pub v: [f32; 3],
+    /// Angular velocity ω (rad/s, body frame).
+    pub w: [f32; 3],
+}
+
+/// The setpoint on the wire: flat outputs up to jerk (world frame) and yaw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WireSetpoint {
+    /// p* (m).
+    pub p: [f32; 3],
+    /// ṗ* (m/s).
+    pub v: [f32; 3],
+    /// p̈* (m/s²).
+    pub a: [f32; 3],
+    /// p⃛* (m/s³).
+    pub j: [f32; 3],
+    /// ψ* (rad).
+    pub yaw: f32,
+    /// ψ̇* (rad/s).
+    pub yaw_rate: f32,
+}
+
+/// One control input: the latest state estimate and the setpoint to track.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Input {
+    /// Sequence number, echoed in the telemetry of the step that used this input.
+    pub seq: u32,
+    /// State estimate.
+    pub state: WireState,
+    /// Setpoint.
+    pub setpoint: WireSetpoint,
+}
+
+/// Host (companion computer, motion capture, PIL test) → firmware.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Uplink {
+    /// A new state estimate and setpoint.
+    Input(Input),
+    /// Ask for a [`Downlink::Hello`] (the boot message may have been sent before anyone listened).
+    Hello,
+    /// Stop the motors, send a [`Downlink::Report`]; under QEMU also end the emulation.
+    Finish,
+}
+
+/// Why the motors are off (or `Running`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LinkStatus {
+    /// No valid state has arrived yet.
+    WaitingForState,
+    /// The controller is flying on fresh input.
+    Running,
+    /// No valid state for longer than the watchdog timeout: motors off.
+    WatchdogTripped,
+    /// The weight blob was rejected at boot: motors stay off.
+    BadBlob,
+}
+
+/// Bits of [`Telemetry::faults`].
+pub mod fault_bits {
+    /// The state had a non-finite component.
+    pub const BAD_STATE: u16 = 1 << 0;
+    /// The setpoint had a non-finite component.
+    pub const BAD_SETPOINT: u16 = 1 << 1;
+    /// dt out of range.
+    pub const BAD_DT: u16 = 1 << 2;
+    /// Non-finite or singular value inside the law.
+    pub const NUMERIC: u16 = 1 << 3;
+    /// Mixer scaled the yaw torque.
+    pub const SAT_YAW: u16 = 1 << 4;
+    /// Mixer scaled roll/pitch.
+    pub const SAT_ROLL_PITCH: u16 = 1 << 5;
+    /// Mixer shifted the collective thrust.
+    pub const SAT_THRUST: u16 = 1 << 6;
+    /// The tilt limit shaped the desired attitude.
+    pub const TILT_LIMITED: u16 = 1 << 7;
+}
+
+/// The controller's [`Faults`] as [`fault_bits`].
+pub fn fault_word(f: &Faults) -> u16 {
+    use fault_bits::*;
+    let mut w = 0;
+    for (on, bit) in [
+        (f.bad_state, BAD_STATE),
+        (f.bad_setpoint, BAD_SETPOINT),
+        (f.bad_dt, BAD_DT),
+        (f.numeric, NUMERIC),
+        (f.saturation.yaw, SAT_YAW),
+        (f.saturation.roll_pitch, SAT_ROLL_PITCH),
+        (f.saturation.thrust, SAT_THRUST),
+        (f.tilt_limited, TILT_LIMITED),
+    ] {
+        if on {
+            w |= bit;
+        }
+    }
+    w
+}
+
+/// What one control step produced, sent after every step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    /// `seq` of the input this step used.
+    pub seq: u32,
+    /// Rotor speeds commanded (rpm), rotors 1..4.
+    pub rpm: [f32; 4],
+    /// Rotor thrusts commanded (N).
+    pub thrust_n: [f32; 4],
+    /// Duty written to the motor PWM, on a 16-bit scale (0..=65535).
+    pub duty: [u16; 4],
+    /// The disturbance-weight estimate a after the step.
+    pub a: [f32; 6],
+    /// Controller faults and conditions ([`fault_bits`]).
+    pub faults: u16,
+    /// Cost of the whole step (controller, PWM map and writes) in counter ticks; see
+    /// [`Hello::cost_unit`].
+    pub step_cost: u32,
+    /// Frames dropped so far (COBS, CRC, decode or overflow errors).
+    pub bad_frames: u32,
+    /// Watchdog trips so far.
+    pub watchdog_trips: u32,
+}
+
+impl Telemetry {
+    /// Fills the controller part from a step's output.
+    pub fn from_output(seq: u32, out: &Output, duty: [u16; 4]) -> Self {
+        let mut a = [0.0; 6];
+        for (dst, src) in a.iter_mut().zip(out.a.iter()) {
+            *dst = *src;
+        }
+        Self {
+            seq,
+            rpm: out.rotors.rpm,
+            thrust_n: out.rotors.thrust_n,
+            duty,
+            a,
+            faults: fault_word(&out.faults),
+            ..Self::default()
+        }
+    }
+}
+
+/// How [`Telemetry::step_cost`] counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CostUnit {
+    /// DWT cycle counter: CPU cycles at the core clock.
+    Cycles,
+    /// SysTick ticks at the 168 MHz QEMU `netduinoplus2` core clock, with `-icount shift=0`
+    /// (one instruction per virtual nanosecond): instructions = ticks · 1000 / 168.
+    QemuSysTick168MHz,
+}
+
+/// Sent at boot and on [`Uplink::Hello`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Hello {
+    /// Control-loop rate (Hz); the controller's dt is 1 / `loop_hz`.
+    pub loop_hz: u32,
+    /// True if the weight blob passed every check at boot.
+    pub blob_ok: bool,
+    /// Length of the embedded blob (bytes).
+    pub blob_len: u32,
+    /// Unit of the step cost.
+    pub cost_unit: CostUnit,
+    /// Watchdog timeout (control ticks without a fresh state).
+    pub watchdog_ticks: u32,
+}
+
+/// Sent on [`Uplink::Finish`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// Control steps run.
+    pub steps: u32,
+    /// Largest step cost seen (same unit as the telemetry).
+    pub max_step_cost: u32,
+    /// Smallest step cost seen.
+    pub min_step_cost: u32,
+    /// Peak stack use since reset (bytes), from the painted stack.
+    pub stack_peak_bytes: u32,
+    /// Size of the stack region (bytes).
+    pub stack_size_bytes: u32,
+    /// Frames dropped.
+    pub bad_frames: u32,
+    /// Watchdog trips.
+    pub watchdog_trips: u32,
+}
+
+/// Firmware → host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Downlink {
+    /// Boot message.
+    Hello(Hello),
+    /// One control step.
+    Telemetry(Telemetry),
+    /// The motors went off without a step (watchdog, bad blob, no state yet).
+    Status(LinkStatus),
+    /// Final statistics.
+    Report(Report),
+}
+
+impl From<&State> for WireState {
+    fn from(s: &State) -> Self {
+        let r = &s.rot;
+        Self {
+            p: s.p_m.into(),
+            rot: [
+                r.m11, r.m12, r.m13, r.m21, r.m22, r.m23, r.m31, r.m32, r.m33,
+            ],
+            v: s.v_body_m_s.into(),
+            w: s.w_body_rad_s.into(),
+        }
+    }
+}
+
+impl From<&WireState> for State {
+    fn from(s: &WireState) -> Self {
+        Self {
+            p_m: Vector3::from(s.p),
+            rot: Matrix3::from_row_slice(&s.rot),
+            v_body_m_s: Vector3::from(s.v),
+            w_body_rad_s: Vector3::from(s.w),
+        }
+    }
+}
+
+impl From<&Setpoint> for WireSetpoint {
+    fn from(s: &Setpoint) -> Self {
+        Self {
+            p: s.p_m.into(),
+            v: s.v_m_s.into(),
+            a: s.a_m_s2.into(),
+            j: s.j_m_s3.into(),
+            yaw: s.yaw_rad,
+            yaw_rate: s.yaw_rate_rad_s,
+        }
+    }
+}
+
+impl From<&WireSetpoint> for Setpoint {
+    fn from(s: &WireSetpoint) -> Self {
+        Self {
+            p_m: Vector3::from(s.p),
+            v_m_s: Vector3::from(s.v),
+            a_m_s2: Vector3::from(s.a),
+            j_m_s3: Vector3::from(s.j),
+            yaw_rad: s.yaw,
+            yaw_rate_rad_s: s.yaw_rate,
+        }
+    }
+}
+
+/// Why a frame was dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameError {
+    /// More than [`MAX_FRAME`] bytes without a delimiter.
+    Overflow,
+    /// Not valid COBS.
+    Cobs,
+    /// Shorter than a CRC, or the CRC does not match.
+    Crc,
+    /// The payload is not a valid message.
+    Decode,
+}
+
+/// Encodes `msg` as one complete frame (delimiter included) into `out`; returns its length.
+///
+/// # Errors
+/// [`FrameError::Overflow`] if the message does not fit `out` (or [`MAX_PAYLOAD`]).
+pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, FrameError> {
+    let mut raw = [0u8; MAX_PAYLOAD + 4];
+    let n = postcard::to_slice(msg, &mut raw[..MAX_PAYLOAD])
+        .map_err(|_| FrameError::Overflow)?
+        .len();
+    let crc = hamflight::blob::crc32(raw.get(..n).ok_or(FrameError::Overflow)?);
+    raw.get_mut(n..n + 4)
+        .ok_or(FrameError::Overflow)?
+        .copy_from_slice(&crc.to_le_bytes());
+    let len = cobs_encode(raw.get(..n + 4).ok_or(FrameError::Overflow)?, out)
+        .ok_or(FrameError::Overflow)?;
+    *out.get_mut(len).ok_or(FrameError::Overflow)? = 0;
+    Ok(len + 1)
+}
+
+/// COBS-encodes `src` into `dst` (no delimiter); `None` if `dst` is too small.
+pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
+    let mut code_at = 0usize;
+    let mut out = 1usize;
+    let mut code = 1u8;
+    for &b in src {
+        if b == 0 {
+            *dst.get_mut(code_at)? = code;
+            code_at = out;
+            out += 1;
+            code = 1;
+        } else {
+            *dst.get_mut(out)? = b;
+            out += 1;
+            code += 1;
+            if code == 0xFF {
+                *dst.get_mut(code_at)? = code;
+                code_at = out;
+                out += 1;
+                code = 1;
+            }
+        }
+    }
+    *dst.get_mut(code_at)? = code;
+    Some(out)
+}
+
+/// Decodes COBS in place (no delimiter in `buf`); returns the decoded length.
+pub fn cobs_decode(buf: &mut [u8]) -> Option<usize> {
+    let len = buf.len();
+    let (mut r, mut w) = (0usize, 0usize);
+    while r < len {
+        let code = *buf.get(r)?;
+        if code == 0 {
+            return None;
+        }
+        r += 1;
+        for _ in 1..code {
+            let b = *buf.get(r)?;
+            if b == 0 {
+                return None;
+            }
+            *buf.get_mut(w)? = b;
+            w += 1;
+            r += 1;
+        }
+        if code != 0xFF && r < len {
+            *buf.get_mut(w)? = 0;
+            w += 1;
+        }
+    }
+    Some(w)
+}
+
+/// Accumulates received bytes and yields one message per frame.
+#[derive(Clone, Debug)]
+pub struct FrameDecoder {
+    buf: [u8; MAX_FRAME],
+    len: usize,
+    overflowed: bool,
+}
+
+impl Default for FrameDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl FrameDecoder {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; MAX_FRAME],
+            len: 0,
+            overflowed: false,
+        }
+    }
+
+    /// Feeds one byte. Returns a message or an error when `byte` ends a frame, `None` otherwise
+    /// (empty frames, i.e. repeated delimiters, are ignored).
+    pub fn push<T: for<'de> Deserialize<'de>>(
+        &mut self,
+        byte: u8,
+    ) -> Option<Result<T, FrameError>> {
+        if byte != 0 {
+            match self.buf.get_mut(self.len) {
+                Some(slot) => {
+                    *slot = byte;
+                    self.len += 1;
+                }
+                None => self.overflowed = true,
+            }
+            return None;
+        }
+        let len = core::mem::replace(&mut self.len, 0);
+        if core::mem::replace(&mut self.overflowed, false) {
+            return Some(Err(FrameError::Overflow));
+        }
+        if len == 0 {
+            return None;
+        }
+        Some(self.finish(len))
+    }
+
+    fn finish<T: for<'de> Deserialize<'de>>(&mut self, len: usize) -> Result<T, FrameError> {
+        let frame = self.buf.get_mut(..len).ok_or(FrameError::Overflow)?;
+        let n = cobs_decode(frame).ok_or(FrameError::Cobs)?;
+        let body_len = n.checked_sub(4).ok_or(FrameError::Crc)?;
+        let body = frame.get(..body_len).ok_or(FrameError::Crc)?;
+        let crc = frame
+            .get(body_len..n)
+            .and_then(|b| b.try_into().ok())
+            .map(u32::from_le_bytes)
+            .ok_or(FrameError::Crc)?;
+        if hamflight::blob::crc32(body) != crc {
+            return Err(FrameError::Crc);
+        }
+        postcard::from_bytes(body).map_err(|_| FrameError::Decode)
+    }
+}

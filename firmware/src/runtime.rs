@@ -1,0 +1,326 @@
+//! The interrupt side on the STM32F405 (board and QEMU): who owns what, and the handlers' bodies.
+//!
+//! - USART RX interrupt (highest priority, short): bytes → [`FrameDecoder`] → the latest
+//!   [`Input`] (or a request flag); bad frames counted.
+//! - TIM5 update interrupt at [`LOOP_HZ`]: takes the latest input, runs
+//!   [`ControlLoop::tick`] (controller, PWM) with the cost counter, queues the telemetry frame.
+//!   The step runs outside any critical section, so reception is never blocked by it.
+//! - Thread mode ([`pump`]): writes queued frames to the UART and sleeps.
+//!
+//! The binaries create the peripherals, call [`init`] and bind the interrupts to [`on_rx`] and
+//! [`on_tick`].
+
+use crate::control_loop::{
+    load_model, ControlLoop, CostCounter, Model, TickOutcome, LOOP_HZ, WATCHDOG_TICKS,
+};
+use crate::link::{self, CostUnit, Downlink, FrameDecoder, Hello, Input, Uplink, MAX_FRAME};
+use crate::motor::Motors;
+use core::cell::{Cell, RefCell};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use critical_section::Mutex;
+use embedded_hal_nb::serial::{Read, Write};
+use stm32f4xx_hal::pac;
+use stm32f4xx_hal::serial::RxListen;
+use stm32f4xx_hal::timer::ErasedChannel;
+
+/// The USART of the link: USART1 under QEMU (the first `-serial`), USART3 on the Crazyflie
+/// (deck connector UART1, PC10 TX / PC11 RX; USART6 is the nRF51 syslink).
+#[cfg(feature = "qemu")]
+pub type LinkUsart = pac::USART1;
+/// The USART of the link (see the `qemu` variant).
+#[cfg(not(feature = "qemu"))]
+pub type LinkUsart = pac::USART3;
+/// The link's receive half.
+pub type LinkRx = stm32f4xx_hal::serial::Rx<LinkUsart>;
+/// The link's interrupt.
+#[cfg(feature = "qemu")]
+pub const LINK_IRQ: pac::Interrupt = pac::Interrupt::USART1;
+/// The link's interrupt.
+#[cfg(not(feature = "qemu"))]
+pub const LINK_IRQ: pac::Interrupt = pac::Interrupt::USART3;
+
+/// The Crazyflie 2.1 motor outputs: M1 TIM2_CH2, M2 TIM2_CH4, M3 TIM2_CH1, M4 TIM4_CH4.
+pub type BoardMotors = Motors<
+    ErasedChannel<pac::TIM2>,
+    ErasedChannel<pac::TIM2>,
+    ErasedChannel<pac::TIM2>,
+    ErasedChannel<pac::TIM4>,
+>;
+
+/// The step-cost counter of this build.
+#[cfg(feature = "qemu")]
+pub type Counter = SysTickCounter;
+/// The step-cost counter of this build.
+#[cfg(not(feature = "qemu"))]
+pub type Counter = DwtCounter;
+
+/// DWT cycle counter (real hardware; reads 0 under QEMU).
+pub struct DwtCounter;
+
+impl CostCounter for DwtCounter {
+    fn now(&mut self) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+    fn since(&mut self, start: u32) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start)
+    }
+}
+
+/// SysTick as a free-running 24-bit down-counter on the core clock. Under QEMU with
+/// `-icount shift=0` it advances 168 ticks per 1000 instructions.
+pub struct SysTickCounter;
+
+impl CostCounter for SysTickCounter {
+    fn now(&mut self) -> u32 {
+        cortex_m::peripheral::SYST::get_current()
+    }
+    fn since(&mut self, start: u32) -> u32 {
+        start.wrapping_sub(cortex_m::peripheral::SYST::get_current()) & 0x00FF_FFFF
+    }
+}
+
+/// The unit of [`Counter`].
+pub const COST_UNIT: CostUnit = if cfg!(feature = "qemu") {
+    CostUnit::QemuSysTick168MHz
+} else {
+    CostUnit::Cycles
+};
+
+type Frame = heapless::Vec<u8, MAX_FRAME>;
+
+struct Tick {
+    control: ControlLoop<Model>,
+    motors: BoardMotors,
+    counter: Counter,
+    timer: pac::TIM5,
+}
+
+static TICK: Mutex<RefCell<Option<Tick>>> = Mutex::new(RefCell::new(None));
+static RX: Mutex<RefCell<Option<(LinkRx, FrameDecoder)>>> = Mutex::new(RefCell::new(None));
+static LATEST: Mutex<Cell<Option<Input>>> = Mutex::new(Cell::new(None));
+static TXQ: Mutex<RefCell<heapless::Deque<Frame, 8>>> =
+    Mutex::new(RefCell::new(heapless::Deque::new()));
+static BAD_FRAMES: AtomicU32 = AtomicU32::new(0);
+static HELLO_REQ: AtomicBool = AtomicBool::new(false);
+static FINISH_REQ: AtomicBool = AtomicBool::new(false);
+static FINISHED: AtomicBool = AtomicBool::new(false);
+static BLOB_OK: AtomicBool = AtomicBool::new(false);
+
+fn queue(msg: &Downlink) {
+    let mut buf = [0u8; MAX_FRAME];
+    if let Ok(n) = link::encode(msg, &mut buf) {
+        if let Ok(frame) = Frame::from_slice(buf.get(..n).unwrap_or(&[])) {
+            critical_section::with(|cs| {
+                // A full queue drops the newest frame: the link is slower than the loop.
+                let _ = TXQ.borrow_ref_mut(cs).push_back(frame);
+            });
+        }
+    }
+}
+
+fn hello() -> Downlink {
+    Downlink::Hello(Hello {
+        loop_hz: LOOP_HZ,
+        blob_ok: BLOB_OK.load(Ordering::Relaxed),
+        blob_len: crate::WEIGHT_BLOB.len() as u32,
+        cost_unit: COST_UNIT,
+        watchdog_ticks: WATCHDOG_TICKS,
+    })
+}
+
+/// What [`init`] reports.
+pub struct Boot {
+    /// The blob check: `Err` keeps the motors off for good.
+    pub blob: Result<(), hamflight::blob::BlobError>,
+}
+
+/// Decodes the blob, builds the loop, starts TIM5 at [`LOOP_HZ`] from a `timer_clock_hz` input
+/// clock, starts the cost counter, enables the interrupts (link RX above the control tick) and
+/// queues the boot [`Hello`].
+pub fn init(
+    mut motors: BoardMotors,
+    mut rx: LinkRx,
+    timer: pac::TIM5,
+    timer_clock_hz: u32,
+    core: &mut cortex_m::Peripherals,
+) -> Boot {
+    motors.off();
+    let model = load_model(crate::WEIGHT_BLOB);
+    let blob = model.as_ref().map(|_| ()).map_err(|e| *e);
+    BLOB_OK.store(blob.is_ok(), Ordering::Relaxed);
+
+    // Cost counters: both are started; the build reads the one that works where it runs.
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+    core.SYST
+        .set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+    core.SYST.set_reload(0x00FF_FFFF);
+    core.SYST.clear_current();
+    core.SYST.enable_counter();
+
+    // TIM5: 1 MHz count, update at LOOP_HZ.
+    // SAFETY: RCC APB1ENR is only modified here, before interrupts are enabled.
+    unsafe {
+        (*pac::RCC::ptr())
+            .apb1enr()
+            .modify(|_, w| w.tim5en().set_bit())
+    };
+    let psc = (timer_clock_hz / 1_000_000).saturating_sub(1);
+    timer.cr1().write(|w| w.cen().clear_bit());
+    timer.psc().write(|w| w.psc().set(psc as u16));
+    timer.arr().write(|w| w.arr().set(1_000_000 / LOOP_HZ - 1));
+    timer.egr().write(|w| w.ug().set_bit());
+    timer.sr().write(|w| w.uif().clear_bit());
+    timer.dier().write(|w| w.uie().set_bit());
+
+    rx.listen();
+    critical_section::with(|cs| {
+        RX.borrow_ref_mut(cs).replace((rx, FrameDecoder::new()));
+        TICK.borrow_ref_mut(cs).replace(Tick {
+            control: ControlLoop::new(model),
+            motors,
+            counter: Counter {},
+            timer,
+        });
+    });
+    queue(&hello());
+    // SAFETY: the handlers' state is in place; priorities are set before unmasking.
+    unsafe {
+        core.NVIC.set_priority(LINK_IRQ, 0x40);
+        core.NVIC.set_priority(pac::Interrupt::TIM5, 0x80);
+        cortex_m::peripheral::NVIC::unmask(LINK_IRQ);
+        cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM5);
+    }
+    // Start the loop last.
+    critical_section::with(|cs| {
+        if let Some(t) = TICK.borrow_ref(cs).as_ref() {
+            t.timer.cr1().write(|w| w.cen().set_bit());
+        }
+    });
+    Boot { blob }
+}
+
+/// Body of the link's RX interrupt.
+pub fn on_rx() {
+    let Some((mut rx, mut dec)) = critical_section::with(|cs| RX.borrow_ref_mut(cs).take()) else {
+        return;
+    };
+    loop {
+        match rx.read() {
+            Ok(byte) => match dec.push::<Uplink>(byte) {
+                Some(Ok(Uplink::Input(input))) => {
+                    critical_section::with(|cs| LATEST.borrow(cs).set(Some(input)));
+                }
+                Some(Ok(Uplink::Hello)) => HELLO_REQ.store(true, Ordering::Release),
+                Some(Ok(Uplink::Finish)) => FINISH_REQ.store(true, Ordering::Release),
+                Some(Err(_)) => {
+                    BAD_FRAMES.fetch_add(1, Ordering::Relaxed);
+                }
+                None => {}
+            },
+            Err(nb::Error::WouldBlock) => break,
+            Err(nb::Error::Other(_)) => {
+                // Overrun, framing or noise: the frame in progress is lost.
+                BAD_FRAMES.fetch_add(1, Ordering::Relaxed);
+                dec = FrameDecoder::new();
+            }
+        }
+    }
+    critical_section::with(|cs| RX.borrow_ref_mut(cs).replace((rx, dec)));
+}
+
+/// Body of the TIM5 update interrupt: one control tick.
+pub fn on_tick() {
+    let Some(mut t) = critical_section::with(|cs| TICK.borrow_ref_mut(cs).take()) else {
+        // Finished (or not initialised): make sure the flag does not fire again.
+        // SAFETY: only clears TIM5's update flag.
+        unsafe { (*pac::TIM5::ptr()).sr().write(|w| w.uif().clear_bit()) };
+        return;
+    };
+    t.timer.sr().write(|w| w.uif().clear_bit());
+
+    if FINISH_REQ.swap(false, Ordering::AcqRel) {
+        t.motors.off();
+        let (peak, size) = stack_peak();
+        let mut report = t.control.report();
+        report.stack_peak_bytes = peak;
+        report.stack_size_bytes = size;
+        report.bad_frames = BAD_FRAMES.load(Ordering::Relaxed);
+        queue(&Downlink::Report(report));
+        FINISHED.store(true, Ordering::Release);
+        t.timer.cr1().write(|w| w.cen().clear_bit());
+        return; // TICK stays empty: motors off for good.
+    }
+
+    if let Some(input) = critical_section::with(|cs| LATEST.borrow(cs).take()) {
+        t.control.on_input(input);
+    }
+    match t.control.tick(&mut t.motors, &mut t.counter) {
+        TickOutcome::Stepped(mut tel) => {
+            tel.bad_frames = BAD_FRAMES.load(Ordering::Relaxed);
+            queue(&Downlink::Telemetry(tel));
+        }
+        TickOutcome::Stopped(status) => queue(&Downlink::Status(status)),
+        TickOutcome::Idle => {}
+    }
+    critical_section::with(|cs| TICK.borrow_ref_mut(cs).replace(t));
+}
+
+/// Thread mode: writes queued frames to the link, answers Hello requests, sleeps until the next
+/// interrupt. Returns true once a Finish was handled and its report sent.
+pub fn pump<W: Write<u8>>(tx: &mut W) -> bool {
+    if HELLO_REQ.swap(false, Ordering::AcqRel) {
+        queue(&hello());
+    }
+    loop {
+        let frame = critical_section::with(|cs| TXQ.borrow_ref_mut(cs).pop_front());
+        match frame {
+            Some(f) => {
+                for &b in f.iter() {
+                    // A write error leaves the frame cut: the host's CRC drops it.
+                    if nb::block!(tx.write(b)).is_err() {
+                        break;
+                    }
+                }
+            }
+            None => break,
+        }
+    }
+    let _ = nb::block!(tx.flush());
+    if FINISHED.load(Ordering::Acquire) {
+        return true;
+    }
+    // Sleep unless something arrived between the check above and here (WFI wakes on a pending
+    // interrupt even with PRIMASK set).
+    cortex_m::interrupt::disable();
+    let idle = critical_section::with(|cs| TXQ.borrow_ref(cs).is_empty())
+        && !HELLO_REQ.load(Ordering::Acquire);
+    if idle {
+        cortex_m::asm::wfi();
+    }
+    // SAFETY: re-enables the interrupts disabled just above; no critical section is open here.
+    unsafe { cortex_m::interrupt::enable() };
+    false
+}
+
+/// Peak stack use and stack size (bytes): cortex-m-rt's `paint-stack` fills everything between
+/// `_stack_end` and `_stack_start` with `0xCCCC_CCCC` at reset; the lowest word that lost its
+/// paint marks the deepest the stack has been.
+pub fn stack_peak() -> (u32, u32) {
+    extern "C" {
+        static _stack_end: u32;
+        static _stack_start: u32;
+    }
+    let lo = core::ptr::addr_of!(_stack_end) as usize;
+    let hi = core::ptr::addr_of!(_stack_start) as usize;
+    let mut p = lo;
+    while p < hi {
+        // SAFETY: p is a word-aligned address inside RAM, between the linker's stack bounds.
+        let v = unsafe { core::ptr::read_volatile(p as *const u32) };
+        if v != cortex_m_rt::STACK_PAINT_VALUE {
+            break;
+        }
+        p += 4;
+    }
+    ((hi - p) as u32, (hi - lo) as u32)
+}
