@@ -131,6 +131,7 @@ pub struct ControlLoop<M> {
     steps: u32,
     max_cost: u32,
     min_cost: u32,
+    total_cost: u64,
 }
 
 impl<M: HamiltonianModel> ControlLoop<M> {
@@ -150,6 +151,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             steps: 0,
             max_cost: 0,
             min_cost: u32::MAX,
+            total_cost: 0,
         }
     }
 
@@ -223,6 +225,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         self.steps = self.steps.wrapping_add(1);
         self.max_cost = self.max_cost.max(spent);
         self.min_cost = self.min_cost.min(spent);
+        self.total_cost = self.total_cost.wrapping_add(u64::from(spent));
         let mut t = Telemetry::from_output(input.seq, &out, pwm);
         t.step_cost = spent;
         t.watchdog_trips = self.watchdog.trips();
@@ -235,6 +238,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             steps: self.steps,
             max_step_cost: self.max_cost,
             min_step_cost: if self.steps == 0 { 0 } else { self.min_cost },
+            total_step_cost: self.total_cost,
             watchdog_trips: self.watchdog.trips(),
             ..Report::default()
         }

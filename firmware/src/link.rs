@@ -208,10 +208,14 @@ pub struct Report {
     pub max_step_cost: u32,
     /// Smallest step cost seen.
     pub min_step_cost: u32,
+    /// Sum of all step costs (mean = total / steps).
+    pub total_step_cost: u64,
     /// Peak stack use since reset (bytes), from the painted stack.
     pub stack_peak_bytes: u32,
     /// Size of the stack region (bytes).
     pub stack_size_bytes: u32,
+    /// Peak stack use during boot (blob decoding), before the loop started (bytes).
+    pub stack_boot_peak_bytes: u32,
     /// Frames dropped.
     pub bad_frames: u32,
     /// Watchdog trips.

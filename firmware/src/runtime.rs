@@ -13,9 +13,11 @@
 use crate::control_loop::{
     load_model, ControlLoop, CostCounter, Model, TickOutcome, LOOP_HZ, WATCHDOG_TICKS,
 };
-use crate::link::{self, CostUnit, Downlink, FrameDecoder, Hello, Input, Uplink, MAX_FRAME};
+use crate::link::{
+    self, CostUnit, Downlink, FrameDecoder, Hello, Input, Report, Uplink, MAX_FRAME,
+};
 use crate::motor::Motors;
-use core::cell::{Cell, RefCell};
+use core::cell::{Cell, RefCell, UnsafeCell};
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use critical_section::Mutex;
 use embedded_hal_nb::serial::{Read, Write};
@@ -95,8 +97,59 @@ struct Tick {
     timer: pac::TIM5,
 }
 
-static TICK: Mutex<RefCell<Option<Tick>>> = Mutex::new(RefCell::new(None));
-static RX: Mutex<RefCell<Option<(LinkRx, FrameDecoder)>>> = Mutex::new(RefCell::new(None));
+/// State owned by one interrupt handler, reached by reference (never moved: the loop holds the
+/// model, kilobytes that must not be copied every tick). An atomic flag makes a second,
+/// overlapping borrow fail instead of aliasing.
+pub struct IsrCell<T> {
+    value: UnsafeCell<Option<T>>,
+    busy: AtomicBool,
+}
+
+// SAFETY: access to `value` is exclusive through the `busy` flag (`with`); T moves between
+// contexts, hence `T: Send`.
+unsafe impl<T: Send> Sync for IsrCell<T> {}
+
+impl<T> IsrCell<T> {
+    /// An empty cell.
+    pub const fn new() -> Self {
+        Self {
+            value: UnsafeCell::new(None),
+            busy: AtomicBool::new(false),
+        }
+    }
+
+    /// Runs `f` on the content; `None` if empty or already borrowed.
+    pub fn with<R>(&self, f: impl FnOnce(&mut T) -> R) -> Option<R> {
+        if self.busy.swap(true, Ordering::Acquire) {
+            return None;
+        }
+        // SAFETY: `busy` was false and is now true: no other reference exists until we reset it.
+        let r = unsafe { (*self.value.get()).as_mut() }.map(f);
+        self.busy.store(false, Ordering::Release);
+        r
+    }
+
+    /// Fills (or empties) the cell; false if it is borrowed.
+    pub fn set(&self, v: Option<T>) -> bool {
+        if self.busy.swap(true, Ordering::Acquire) {
+            return false;
+        }
+        // SAFETY: as in `with`.
+        unsafe { *self.value.get() = v };
+        self.busy.store(false, Ordering::Release);
+        true
+    }
+}
+
+impl<T> Default for IsrCell<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+static TICK: IsrCell<Tick> = IsrCell::new();
+static RX: IsrCell<(LinkRx, FrameDecoder)> = IsrCell::new();
+static BOOT_STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 static LATEST: Mutex<Cell<Option<Input>>> = Mutex::new(Cell::new(None));
 static TXQ: Mutex<RefCell<heapless::Deque<Frame, 8>>> =
     Mutex::new(RefCell::new(heapless::Deque::new()));
@@ -105,6 +158,8 @@ static HELLO_REQ: AtomicBool = AtomicBool::new(false);
 static FINISH_REQ: AtomicBool = AtomicBool::new(false);
 static FINISHED: AtomicBool = AtomicBool::new(false);
 static BLOB_OK: AtomicBool = AtomicBool::new(false);
+static STEPS: AtomicU32 = AtomicU32::new(0);
+static REPORT: Mutex<Cell<Option<Report>>> = Mutex::new(Cell::new(None));
 
 fn queue(msg: &Downlink) {
     let mut buf = [0u8; MAX_FRAME];
@@ -136,7 +191,9 @@ pub struct Boot {
 
 /// Decodes the blob, builds the loop, starts TIM5 at [`LOOP_HZ`] from a `timer_clock_hz` input
 /// clock, starts the cost counter, enables the interrupts (link RX above the control tick) and
-/// queues the boot [`Hello`].
+/// queues the boot [`Hello`]. Never inlined: its large temporaries (the decoded weights) live in
+/// its own frame, gone once it returns; call [`repaint_stack`] then.
+#[inline(never)]
 pub fn init(
     mut motors: BoardMotors,
     mut rx: LinkRx,
@@ -174,15 +231,13 @@ pub fn init(
     timer.dier().write(|w| w.uie().set_bit());
 
     rx.listen();
-    critical_section::with(|cs| {
-        RX.borrow_ref_mut(cs).replace((rx, FrameDecoder::new()));
-        TICK.borrow_ref_mut(cs).replace(Tick {
-            control: ControlLoop::new(model),
-            motors,
-            counter: Counter {},
-            timer,
-        });
-    });
+    RX.set(Some((rx, FrameDecoder::new())));
+    TICK.set(Some(Tick {
+        control: ControlLoop::new(model),
+        motors,
+        counter: Counter {},
+        timer,
+    }));
     queue(&hello());
     // SAFETY: the handlers' state is in place; priorities are set before unmasking.
     unsafe {
@@ -192,19 +247,16 @@ pub fn init(
         cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM5);
     }
     // Start the loop last.
-    critical_section::with(|cs| {
-        if let Some(t) = TICK.borrow_ref(cs).as_ref() {
-            t.timer.cr1().write(|w| w.cen().set_bit());
-        }
-    });
+    TICK.with(|t| t.timer.cr1().write(|w| w.cen().set_bit()));
     Boot { blob }
 }
 
 /// Body of the link's RX interrupt.
 pub fn on_rx() {
-    let Some((mut rx, mut dec)) = critical_section::with(|cs| RX.borrow_ref_mut(cs).take()) else {
-        return;
-    };
+    RX.with(|(rx, dec)| rx_drain(rx, dec));
+}
+
+fn rx_drain(rx: &mut LinkRx, dec: &mut FrameDecoder) {
     loop {
         match rx.read() {
             Ok(byte) => match dec.push::<Uplink>(byte) {
@@ -222,34 +274,36 @@ pub fn on_rx() {
             Err(nb::Error::Other(_)) => {
                 // Overrun, framing or noise: the frame in progress is lost.
                 BAD_FRAMES.fetch_add(1, Ordering::Relaxed);
-                dec = FrameDecoder::new();
+                *dec = FrameDecoder::new();
             }
         }
     }
-    critical_section::with(|cs| RX.borrow_ref_mut(cs).replace((rx, dec)));
 }
 
 /// Body of the TIM5 update interrupt: one control tick.
 pub fn on_tick() {
-    let Some(mut t) = critical_section::with(|cs| TICK.borrow_ref_mut(cs).take()) else {
-        // Finished (or not initialised): make sure the flag does not fire again.
-        // SAFETY: only clears TIM5's update flag.
-        unsafe { (*pac::TIM5::ptr()).sr().write(|w| w.uif().clear_bit()) };
+    // SAFETY: only clears TIM5's update flag (whether or not the loop is set up).
+    unsafe { (*pac::TIM5::ptr()).sr().write(|w| w.uif().clear_bit()) };
+    if FINISHED.load(Ordering::Acquire) {
         return;
-    };
-    t.timer.sr().write(|w| w.uif().clear_bit());
+    }
+    TICK.with(tick);
+}
 
+fn tick(t: &mut Tick) {
     if FINISH_REQ.swap(false, Ordering::AcqRel) {
         t.motors.off();
         let (peak, size) = stack_peak();
         let mut report = t.control.report();
         report.stack_peak_bytes = peak;
         report.stack_size_bytes = size;
+        report.stack_boot_peak_bytes = BOOT_STACK_PEAK.load(Ordering::Relaxed);
         report.bad_frames = BAD_FRAMES.load(Ordering::Relaxed);
         queue(&Downlink::Report(report));
+        critical_section::with(|cs| REPORT.borrow(cs).set(Some(report)));
         FINISHED.store(true, Ordering::Release);
         t.timer.cr1().write(|w| w.cen().clear_bit());
-        return; // TICK stays empty: motors off for good.
+        return; // FINISHED: motors off for good.
     }
 
     if let Some(input) = critical_section::with(|cs| LATEST.borrow(cs).take()) {
@@ -257,13 +311,34 @@ pub fn on_tick() {
     }
     match t.control.tick(&mut t.motors, &mut t.counter) {
         TickOutcome::Stepped(mut tel) => {
+            STEPS.fetch_add(1, Ordering::Release);
             tel.bad_frames = BAD_FRAMES.load(Ordering::Relaxed);
             queue(&Downlink::Telemetry(tel));
         }
         TickOutcome::Stopped(status) => queue(&Downlink::Status(status)),
         TickOutcome::Idle => {}
     }
-    critical_section::with(|cs| TICK.borrow_ref_mut(cs).replace(t));
+}
+
+/// Hands an input to the next tick as if it had come over the link (self-driven benchmarks).
+pub fn inject(input: Input) {
+    critical_section::with(|cs| LATEST.borrow(cs).set(Some(input)));
+}
+
+/// Asks the next tick to stop the motors and produce the final [`Report`], as
+/// [`Uplink::Finish`] does.
+pub fn finish() {
+    FINISH_REQ.store(true, Ordering::Release);
+}
+
+/// Control steps run so far.
+pub fn steps() -> u32 {
+    STEPS.load(Ordering::Acquire)
+}
+
+/// The final report, once a finish request was handled.
+pub fn report() -> Option<Report> {
+    critical_section::with(|cs| REPORT.borrow(cs).get())
 }
 
 /// Thread mode: writes queued frames to the link, answers Hello requests, sleeps until the next
@@ -301,6 +376,28 @@ pub fn pump<W: Write<u8>>(tx: &mut W) -> bool {
     // SAFETY: re-enables the interrupts disabled just above; no critical section is open here.
     unsafe { cortex_m::interrupt::enable() };
     false
+}
+
+/// Records the boot-time stack peak (blob decoding moves the networks' weights around) and
+/// paints the stack below the current frame again, so that [`stack_peak`] afterwards measures
+/// the steady state: the control loop, the interrupts and thread mode.
+pub fn repaint_stack() {
+    extern "C" {
+        static _stack_end: u32;
+    }
+    BOOT_STACK_PEAK.store(stack_peak().0, Ordering::Relaxed);
+    let lo = core::ptr::addr_of!(_stack_end) as usize;
+    let sp = cortex_m::register::msp::read() as usize;
+    // Leave a margin below the live frame of this function.
+    let top = sp.saturating_sub(64) & !3;
+    cortex_m::interrupt::free(|_| {
+        let mut p = lo;
+        while p < top {
+            // SAFETY: word-aligned, inside RAM below the live stack, with interrupts disabled.
+            unsafe { core::ptr::write_volatile(p as *mut u32, cortex_m_rt::STACK_PAINT_VALUE) };
+            p += 4;
+        }
+    });
 }
 
 /// Peak stack use and stack size (bytes): cortex-m-rt's `paint-stack` fills everything between

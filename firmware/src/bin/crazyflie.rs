@@ -64,6 +64,7 @@ fn main() -> ! {
     let (mut tx, rx) = serial.split();
 
     let boot = runtime::init(motors, rx, dp.TIM5, clocks.timclk1().raw(), &mut cp);
+    runtime::repaint_stack();
     match boot.blob {
         Ok(()) => defmt::info!(
             "hamflight: blob ok ({} bytes), loop {} Hz",

@@ -55,6 +55,7 @@ fn main() -> ! {
     let (mut tx, rx) = serial.split();
 
     let boot = runtime::init(motors, rx, dp.TIM5, QEMU_TIMER_CLOCK_HZ, &mut cp);
+    runtime::repaint_stack();
     match boot.blob {
         Ok(()) => hprintln!(
             "hamflight-qemu: blob ok ({} bytes), loop {} Hz",
@@ -66,10 +67,84 @@ fn main() -> ! {
             e
         ),
     }
+    #[cfg(feature = "bench")]
+    bench::run(&mut tx);
+    #[cfg(not(feature = "bench"))]
     loop {
         if runtime::pump(&mut tx) {
             hprintln!("hamflight-qemu: finished");
             debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+}
+
+/// Self-driven cost benchmark (feature `bench`): one input per tick along paper-spiral, with the
+/// state off the reference by a few centimetres and degrees so that every term of the law works.
+#[cfg(feature = "bench")]
+mod bench {
+    use super::*;
+    use hamflight_firmware::control_loop::DT_S;
+    use hamflight_firmware::link::{Input, WireSetpoint, WireState};
+    use libm::{cosf, sinf};
+    use nalgebra::{Rotation3, Vector3};
+
+    /// Steps measured.
+    const STEPS: u32 = 2000;
+
+    fn input(k: u32) -> Input {
+        let t = k as f32 * DT_S;
+        let w = core::f32::consts::TAU / 10.0;
+        let (s, c) = (sinf(w * t), cosf(w * t));
+        let p_ref = Vector3::new(0.5 * c, 0.5 * s, 0.5 + 0.03 * t);
+        let v_ref = Vector3::new(-0.5 * w * s, 0.5 * w * c, 0.03);
+        let a_ref = Vector3::new(-0.5 * w * w * c, -0.5 * w * w * s, 0.0);
+        let j_ref = Vector3::new(0.5 * w * w * w * s, -0.5 * w * w * w * c, 0.0);
+        let state = hamflight::State {
+            p_m: p_ref + Vector3::new(0.02 * s, -0.01 * c, 0.005),
+            rot: Rotation3::from_euler_angles(0.05 * s, -0.04 * c, 0.1 * s).into_inner(),
+            v_body_m_s: v_ref + Vector3::new(0.01, -0.02, 0.0),
+            w_body_rad_s: Vector3::new(0.2 * c, -0.1 * s, 0.05),
+        };
+        let sp = hamflight::Setpoint {
+            p_m: p_ref,
+            v_m_s: v_ref,
+            a_m_s2: a_ref,
+            j_m_s3: j_ref,
+            yaw_rad: 0.0,
+            yaw_rate_rad_s: 0.0,
+        };
+        Input {
+            seq: k,
+            state: WireState::from(&state),
+            setpoint: WireSetpoint::from(&sp),
+        }
+    }
+
+    pub fn run<W: embedded_hal_nb::serial::Write<u8>>(tx: &mut W) -> ! {
+        for k in 0..STEPS {
+            runtime::inject(input(k));
+            while runtime::steps() <= k {
+                runtime::pump(tx);
+            }
+        }
+        runtime::finish();
+        while !runtime::pump(tx) {}
+        match runtime::report() {
+            Some(r) => hprintln!(
+                "BENCH steps={} total={} max={} min={} stack_peak={} stack_boot_peak={} stack_size={} unit=systick168",
+                r.steps,
+                r.total_step_cost,
+                r.max_step_cost,
+                r.min_step_cost,
+                r.stack_peak_bytes,
+                r.stack_boot_peak_bytes,
+                r.stack_size_bytes
+            ),
+            None => hprintln!("BENCH no report"),
+        }
+        debug::exit(debug::EXIT_SUCCESS);
+        loop {
+            cortex_m::asm::wfi();
         }
     }
 }
