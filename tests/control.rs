@@ -25,16 +25,22 @@ fn state() -> impl Strategy<Value = State> {
 }
 
 fn setpoint() -> impl Strategy<Value = Setpoint> {
-    (vec3(5.0), vec3(3.0), vec3(10.0), vec3(30.0), -3.2f32..3.2, -2.0f32..2.0).prop_map(
-        |(p, v, a, j, yaw, yaw_rate)| Setpoint {
+    (
+        vec3(5.0),
+        vec3(3.0),
+        vec3(10.0),
+        vec3(30.0),
+        -3.2f32..3.2,
+        -2.0f32..2.0,
+    )
+        .prop_map(|(p, v, a, j, yaw, yaw_rate)| Setpoint {
             p_m: p,
             v_m_s: v,
             a_m_s2: a,
             j_m_s3: j,
             yaw_rad: yaw,
             yaw_rate_rad_s: yaw_rate,
-        },
-    )
+        })
 }
 
 proptest! {
@@ -91,14 +97,25 @@ fn non_finite_inputs_give_motors_off_and_a_fault() {
     assert!(out.a.iter().all(|x| x.is_finite()));
     let hover = 0.027 * 9.8;
     let total: f32 = out.rotors.thrust_n.iter().sum();
-    assert!((total - hover).abs() < 1e-3 * hover, "hover thrust {total} vs {hover}");
+    assert!(
+        (total - hover).abs() < 1e-3 * hover,
+        "hover thrust {total} vs {hover}"
+    );
 }
 
 #[test]
 fn default_gains_are_pinned() {
     let g = Gains::default();
-    assert_eq!((g.k_p, g.k_v), (0.135, 0.0675), "the paper's translational gains");
-    assert_eq!((g.k_r, g.k_w), (0.007, 0.00115), "crazyflie-firmware's Lee gains");
+    assert_eq!((g.k_p, g.k_v), (16.0 * 0.027, 8.0 * 0.027));
+    assert_eq!((g.k_r, g.k_w), (0.015, 0.002));
+    assert_eq!(
+        (g.rates.c_p, g.rates.c_v, g.rates.c_r, g.rates.c_w),
+        (800.0, 500.0, 20_000.0, 2_000.0)
+    );
+    assert!(g.adapt);
     let p = Gains::paper();
-    assert_eq!((p.k_r, p.k_w, p.rates.c_p, p.rates.c_r), (1.0, 0.08, 0.04, 0.5));
+    assert_eq!(
+        (p.k_r, p.k_w, p.rates.c_p, p.rates.c_r),
+        (1.0, 0.08, 0.04, 0.5)
+    );
 }
