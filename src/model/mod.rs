@@ -3,11 +3,15 @@
 //! networks give J⁻¹(q), the input gain g(q) and the disturbance features W(q, 𝔭).
 
 use crate::nn::Mlp;
-use nalgebra::{Matrix3, SMatrix};
+use nalgebra::{Matrix3, SMatrix, Vector4};
 use serde::{Deserialize, Serialize};
 
+pub mod dynamics;
+pub mod learned;
 mod nominal;
 mod state;
+pub use dynamics::{hamiltonian, rk4_step, StateDerivative};
+pub use learned::LearnedModel;
 pub use nominal::{true_input_gain, NominalModel, NOMINAL_TORQUE_FEATURE_NM};
 pub use state::State;
 
@@ -36,6 +40,15 @@ pub struct ModelTerms {
 pub trait HamiltonianModel {
     /// M⁻¹, g and W at `state`.
     fn terms(&self, state: &State) -> ModelTerms;
+
+    /// The state derivative of paper eq. 1 (Hamilton's equations on SE(3)) and eq. 2 (ζ̇) under
+    /// the control `u` = [f (N); τ (N·m)] and the disturbance d = W(q, 𝔭) `a`.
+    ///
+    /// The default assumes J does not depend on q (no ∂H/∂rᵢ, no d/dt J⁻¹), which is exact for
+    /// [`NominalModel`]; [`LearnedModel`] adds both through its network's input Jacobians.
+    fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {
+        dynamics::constant_inertia_dynamics(self, state, u, a)
+    }
 }
 
 /// Width of every hidden layer. A performance knob: the whole control step must fit the MCU budget.
