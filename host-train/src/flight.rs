@@ -10,8 +10,79 @@
 
 use crate::controller::{Controller, TrajectoryPoint};
 use crate::plant::PlantState;
-use hamflight::model::{HamiltonianModel, NominalModel};
-use hamflight::{FlightController, Gains, Output};
+use crate::scenario::Scenario;
+use anyhow::{bail, Context, Result};
+use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
+use hamflight::{FlightController, Gains, Output, Setpoint, State};
+use std::path::Path;
+
+/// The weight blob `adaptive` and `learned` use when none is given.
+pub const DEFAULT_WEIGHTS: &str = "weights/default.hfw";
+
+/// Names of the core controllers, with a one-line description each.
+pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
+    ("adaptive", "learned Hamiltonian model + adaptation law (the paper's controller)"),
+    ("learned", "learned Hamiltonian model, adaptation off (the paper's \"without adaptation\")"),
+    (
+        "geometric-adaptive",
+        "nominal model + adaptation on a constant world force and body torque",
+    ),
+    ("ida-pbc", "the energy-based law on the nominal model, no adaptation"),
+];
+
+/// A host controller that is the core's: it also gives the core's full [`Output`].
+pub trait CoreStep: Controller {
+    /// One core step on f32 state and setpoint.
+    fn core_step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output;
+}
+
+impl<M: HamiltonianModel> CoreStep for CoreController<M> {
+    fn core_step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output {
+        let out = self.inner.step(state, sp, dt_s);
+        self.last = Some(out);
+        out
+    }
+}
+
+/// Loads a learned model from a weight blob, with the file named in any error.
+pub fn load_learned(path: &Path) -> Result<LearnedModel> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("cannot read weight blob `{}`", path.display()))?;
+    LearnedModel::from_blob(&bytes)
+        .map_err(|e| anyhow::anyhow!("weight blob `{}`: {e}", path.display()))
+}
+
+/// A core controller by name; `weights` (default [`DEFAULT_WEIGHTS`]) for the learned ones.
+pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreStep>> {
+    let weights = weights.unwrap_or(Path::new(DEFAULT_WEIGHTS));
+    let no_adapt = Gains {
+        adapt: false,
+        ..Gains::default()
+    };
+    Ok(match name {
+        "adaptive" => Box::new(CoreController::new(name, load_learned(weights)?, Gains::default())),
+        "learned" => Box::new(CoreController::new(name, load_learned(weights)?, no_adapt)),
+        "geometric-adaptive" => Box::new(geometric_adaptive()),
+        "ida-pbc" => Box::new(ida_pbc()),
+        _ => {
+            let names: Vec<&str> = CORE_CONTROLLERS.iter().map(|(n, _)| *n).collect();
+            bail!("unknown core controller `{name}`: expected one of {}", names.join(", "))
+        }
+    })
+}
+
+/// Any controller by name: the core's ([`CORE_CONTROLLERS`]) or a baseline (`pid`, `geometric`).
+pub fn by_name(name: &str, scenario: &Scenario, weights: Option<&Path>) -> Result<Box<dyn Controller>> {
+    if CORE_CONTROLLERS.iter().any(|(n, _)| *n == name) {
+        let c = core_by_name(name, weights)?;
+        let c: Box<dyn Controller> = c;
+        return Ok(c);
+    }
+    crate::baselines::by_name(name, scenario).map_err(|e| {
+        let core: Vec<&str> = CORE_CONTROLLERS.iter().map(|(n, _)| *n).collect();
+        anyhow::anyhow!("{e}, {}", core.join(", "))
+    })
+}
 
 /// Adapts a core [`FlightController`] to the host [`Controller`] trait.
 pub struct CoreController<M> {

@@ -1,0 +1,86 @@
+//! The controller interface every flight controller implements on the host (the baselines here,
+//! and the core's adaptive controller through an adapter), and the reference it tracks.
+
+use nalgebra::Vector3;
+
+use crate::plant::PlantState;
+
+/// One point of a reference trajectory: the flat outputs and their derivatives (f64).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrajectoryPoint {
+    /// Desired position p* (m, world).
+    pub p_m: Vector3<f64>,
+    /// Desired velocity ṗ* (m/s, world).
+    pub v_m_s: Vector3<f64>,
+    /// Desired acceleration p̈* (m/s², world).
+    pub a_m_s2: Vector3<f64>,
+    /// Desired jerk p⃛* (m/s³, world).
+    pub j_m_s3: Vector3<f64>,
+    /// Desired yaw ψ* (rad).
+    pub yaw_rad: f64,
+    /// Desired yaw rate ψ̇* (rad/s).
+    pub yaw_rate_rad_s: f64,
+}
+
+impl TrajectoryPoint {
+    /// Hold `p_m` with yaw `yaw_rad`.
+    pub fn hover(p_m: Vector3<f64>, yaw_rad: f64) -> Self {
+        Self {
+            p_m,
+            v_m_s: Vector3::zeros(),
+            a_m_s2: Vector3::zeros(),
+            j_m_s3: Vector3::zeros(),
+            yaw_rad,
+            yaw_rate_rad_s: 0.0,
+        }
+    }
+}
+
+impl From<&TrajectoryPoint> for hamflight::Setpoint {
+    fn from(t: &TrajectoryPoint) -> Self {
+        hamflight::Setpoint {
+            p_m: t.p_m.cast::<f32>(),
+            v_m_s: t.v_m_s.cast::<f32>(),
+            a_m_s2: t.a_m_s2.cast::<f32>(),
+            j_m_s3: t.j_m_s3.cast::<f32>(),
+            yaw_rad: t.yaw_rad as f32,
+            yaw_rate_rad_s: t.yaw_rate_rad_s as f32,
+        }
+    }
+}
+
+impl From<&PlantState> for hamflight::State {
+    fn from(s: &PlantState) -> Self {
+        hamflight::State {
+            p_m: s.p_m.cast::<f32>(),
+            rot: s.rot.cast::<f32>(),
+            v_body_m_s: s.v_body_m_s.cast::<f32>(),
+            w_body_rad_s: s.w_body_rad_s.cast::<f32>(),
+        }
+    }
+}
+
+/// A flight controller: state + reference in, four rotor speed commands out.
+pub trait Controller {
+    /// Short name, as used on the command line and in reports (e.g. `"pid"`).
+    fn name(&self) -> &str;
+
+    /// Forget all internal state (integrators, adaptation, filters) before a new flight.
+    fn reset(&mut self);
+
+    /// One control tick at time `t_s` (s) with the measured `state`, the `reference` and the
+    /// tick period `dt_s` (s). Returns rotor speed commands (rpm) for rotors 1..4 (numbering of
+    /// [`crate::plant`]); the plant clamps them to its limits and holds them until the next tick.
+    fn step(
+        &mut self,
+        t_s: f64,
+        state: &PlantState,
+        reference: &TrajectoryPoint,
+        dt_s: f64,
+    ) -> [f64; 4];
+
+    /// The current adaptation estimate (e.g. the paper's `a`), if the controller adapts.
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        None
+    }
+}

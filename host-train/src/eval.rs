@@ -1,0 +1,292 @@
+//! Closed-loop evaluation: fly a scenario with a controller, log it, score it, plot it.
+//!
+//! # `report.json`
+//!
+//! | key | meaning |
+//! | --- | --- |
+//! | `scenario` | scenario name |
+//! | `scenario_file` | path of the scenario file (or null) |
+//! | `controller` | controller name |
+//! | `rmse_pos_m` | position RMSE over the whole flight (m) |
+//! | `rmse_pos_window_m` | position RMSE over t ≥ `window_start_s` (m; null if the flight ended before) |
+//! | `window_start_s` | start of the scoring window (5 s) |
+//! | `max_err_m` | largest position error (m) |
+//! | `final_err_m` | position error at the last logged tick (m) |
+//! | `crashed` | true if the error exceeded 1 m, z went below 0 or the state became non-finite |
+//! | `crash_time_s` | time of the crash (s) or null |
+//! | `duration_s` | simulated time actually flown (s) |
+//! | `planned_duration_s` | the scenario's duration (s) |
+//! | `control_hz`, `physics_hz` | controller rate and effective physics rate (Hz) |
+//! | `wall_s` | wall-clock time of the flight (s) |
+//! | `sim_speed` | simulated seconds per wall second |
+//! | `control_step_us` | mean wall time of one controller step on this host (µs) |
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::baselines;
+use crate::controller::Controller;
+use crate::scenario::Scenario;
+
+/// Position error (m) above which a flight counts as crashed.
+pub const CRASH_ERR_M: f64 = 1.0;
+/// Start of the scoring window (s): RMSE after the adaptation transient.
+pub const WINDOW_START_S: f64 = 5.0;
+
+/// Everything logged during one flight, one entry per control tick.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct FlightLog {
+    /// Scenario name.
+    pub scenario: String,
+    /// Controller name.
+    pub controller: String,
+    /// Tick times (s).
+    pub t_s: Vec<f64>,
+    /// Flown (true) position (m, world).
+    pub p_m: Vec<[f64; 3]>,
+    /// Desired position (m, world).
+    pub p_ref_m: Vec<[f64; 3]>,
+    /// Position error |p − p*| (m).
+    pub err_m: Vec<f64>,
+    /// Rotor commands issued at each tick (rpm); the last tick may repeat the previous command.
+    pub rpm: Vec<[f64; 4]>,
+    /// Adaptation estimate at each tick (empty vectors if the controller does not adapt).
+    pub adaptation: Vec<Vec<f64>>,
+    /// Time of the crash (s), if any.
+    pub crash_time_s: Option<f64>,
+    /// Planned duration (s).
+    pub planned_duration_s: f64,
+    /// Control rate (Hz).
+    pub control_hz: f64,
+    /// Effective physics rate (Hz).
+    pub physics_hz: f64,
+    /// Wall time of the whole flight (s).
+    pub wall_s: f64,
+    /// Total wall time spent inside `Controller::step` (s).
+    pub control_wall_s: f64,
+    /// Number of controller steps.
+    pub control_steps: u64,
+}
+
+/// Fly `scenario` with `ctrl` (which is reset first). Stops early on a crash.
+pub fn fly(scenario: &Scenario, ctrl: &mut dyn Controller) -> FlightLog {
+    fly_with_progress(scenario, ctrl, None)
+}
+
+/// [`fly`], ticking an optional progress bar once per simulated second.
+pub fn fly_with_progress(
+    scenario: &Scenario,
+    ctrl: &mut dyn Controller,
+    progress: Option<&indicatif::ProgressBar>,
+) -> FlightLog {
+    let wall0 = Instant::now();
+    ctrl.reset();
+    let mut plant = scenario.plant();
+    let mut rng = ChaCha8Rng::seed_from_u64(scenario.spec.seed);
+    let dt = scenario.control_dt_s();
+    let nsub = scenario.physics_substeps();
+    let dt_phys = dt / nsub as f64;
+    let n_ticks = (scenario.spec.duration_s / dt).round() as u64;
+    let mut log = FlightLog {
+        scenario: scenario.name.clone(),
+        controller: ctrl.name().to_string(),
+        planned_duration_s: scenario.spec.duration_s,
+        control_hz: scenario.spec.control_hz,
+        physics_hz: 1.0 / dt_phys,
+        ..Default::default()
+    };
+    let ticks_per_s = (1.0 / dt).round().max(1.0) as u64;
+    let mut last_cmd = [0.0; 4];
+    for k in 0..=n_ticks {
+        let t = k as f64 * dt;
+        plant.set_t_s(t);
+        let truth = *plant.state();
+        let r = scenario.reference(t);
+        let err = (truth.p_m - r.p_m).norm();
+        log.t_s.push(t);
+        log.p_m.push(truth.p_m.into());
+        log.p_ref_m.push(r.p_m.into());
+        log.err_m.push(if err.is_finite() { err } else { f64::INFINITY });
+        log.adaptation
+            .push(ctrl.adaptation_estimate().unwrap_or_default());
+        if !truth.is_finite() || !(err <= CRASH_ERR_M) || truth.p_m.z < 0.0 {
+            log.rpm.push(last_cmd);
+            log.crash_time_s = Some(t);
+            break;
+        }
+        if k == n_ticks {
+            log.rpm.push(last_cmd);
+            break;
+        }
+        let meas = plant.measure(&mut rng);
+        let c0 = Instant::now();
+        let cmd = ctrl.step(t, &meas, &r, dt);
+        log.control_wall_s += c0.elapsed().as_secs_f64();
+        log.control_steps += 1;
+        last_cmd = plant.params.clamp_rpm(cmd);
+        log.rpm.push(last_cmd);
+        for _ in 0..nsub {
+            plant.step(last_cmd, dt_phys);
+        }
+        if let Some(pb) = progress {
+            if k % ticks_per_s == 0 {
+                pb.inc(1);
+            }
+        }
+    }
+    log.wall_s = wall0.elapsed().as_secs_f64();
+    log
+}
+
+/// The scores of one flight (the content of `report.json`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Report {
+    /// Scenario name.
+    pub scenario: String,
+    /// Scenario file, if any.
+    pub scenario_file: Option<String>,
+    /// Controller name.
+    pub controller: String,
+    /// Position RMSE over the whole flight (m).
+    pub rmse_pos_m: f64,
+    /// Position RMSE over t ≥ `window_start_s` (m).
+    pub rmse_pos_window_m: Option<f64>,
+    /// Scoring-window start (s).
+    pub window_start_s: f64,
+    /// Largest position error (m).
+    pub max_err_m: f64,
+    /// Error at the last tick (m).
+    pub final_err_m: f64,
+    /// Crashed (error > 1 m, z < 0 or non-finite state).
+    pub crashed: bool,
+    /// Crash time (s).
+    pub crash_time_s: Option<f64>,
+    /// Simulated time flown (s).
+    pub duration_s: f64,
+    /// Planned duration (s).
+    pub planned_duration_s: f64,
+    /// Control rate (Hz).
+    pub control_hz: f64,
+    /// Physics rate (Hz).
+    pub physics_hz: f64,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Simulated seconds per wall second.
+    pub sim_speed: f64,
+    /// Mean controller step cost on the host (µs).
+    pub control_step_us: f64,
+}
+
+fn rms(xs: impl Iterator<Item = f64>) -> Option<f64> {
+    let (mut s, mut n) = (0.0, 0usize);
+    for x in xs {
+        s += x * x;
+        n += 1;
+    }
+    (n > 0).then(|| (s / n as f64).sqrt())
+}
+
+impl Report {
+    /// Score a flight log.
+    pub fn from_log(log: &FlightLog, scenario_file: Option<&Path>) -> Self {
+        let duration = log.t_s.last().copied().unwrap_or(0.0);
+        let err_at = |e: f64| if e.is_finite() { e } else { f64::MAX };
+        Self {
+            scenario: log.scenario.clone(),
+            scenario_file: scenario_file.map(|p| p.display().to_string()),
+            controller: log.controller.clone(),
+            rmse_pos_m: rms(log.err_m.iter().map(|&e| err_at(e))).unwrap_or(0.0),
+            rmse_pos_window_m: rms(log
+                .t_s
+                .iter()
+                .zip(&log.err_m)
+                .filter(|(t, _)| **t >= WINDOW_START_S - 1e-9)
+                .map(|(_, &e)| err_at(e))),
+            window_start_s: WINDOW_START_S,
+            max_err_m: log.err_m.iter().map(|&e| err_at(e)).fold(0.0, f64::max),
+            final_err_m: log.err_m.last().copied().map(err_at).unwrap_or(0.0),
+            crashed: log.crash_time_s.is_some(),
+            crash_time_s: log.crash_time_s,
+            duration_s: duration,
+            planned_duration_s: log.planned_duration_s,
+            control_hz: log.control_hz,
+            physics_hz: log.physics_hz,
+            wall_s: log.wall_s,
+            sim_speed: if log.wall_s > 0.0 {
+                duration / log.wall_s
+            } else {
+                f64::INFINITY
+            },
+            control_step_us: if log.control_steps > 0 {
+                1e6 * log.control_wall_s / log.control_steps as f64
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// Write `value` as pretty JSON to `path` through a temporary file and a rename.
+pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).context("cannot serialize JSON")?;
+    write_atomic(path, text.as_bytes())
+}
+
+/// Write bytes to `path` through `path.tmp` and a rename, so no partial file is left behind.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write `{}`", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("cannot rename `{}` to `{}`", tmp.display(), path.display())
+    })
+}
+
+/// Arguments of `host-train eval`.
+#[derive(Args, Debug, Clone)]
+pub struct EvalArgs {
+    /// Scenario TOML file to fly (see scenarios/*.toml for the keys).
+    #[arg(long, value_name = "FILE")]
+    pub scenario: PathBuf,
+    /// Controller to fly: `pid` or `geometric` (default: the scenario's `controller` key, else
+    /// `geometric`).
+    #[arg(long, value_name = "NAME")]
+    pub controller: Option<String>,
+    /// Output directory for report.json, path.svg and error.svg (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// Run `host-train eval`: fly, write `report.json`, `path.svg`, `error.svg`; return the report.
+pub fn run(args: &EvalArgs) -> Result<Report> {
+    let scenario = Scenario::load(&args.scenario)?;
+    let name = args
+        .controller
+        .clone()
+        .or_else(|| scenario.spec.controller.clone())
+        .unwrap_or_else(|| "geometric".into());
+    let mut ctrl = baselines::by_name(&name, &scenario)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory `{}`", args.out.display()))?;
+    let pb = indicatif::ProgressBar::new(scenario.spec.duration_s.ceil() as u64);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} s simulated")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb.set_message(format!("{} / {}", scenario.name, name));
+    let log = fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb));
+    pb.finish_and_clear();
+    let report = Report::from_log(&log, Some(&args.scenario));
+    write_json_atomic(&args.out.join("report.json"), &report)?;
+    crate::plot::path_svg(&[(name.as_str(), &log)], &args.out.join("path.svg"))?;
+    crate::plot::error_svg(&[(name.as_str(), &log)], &args.out.join("error.svg"))?;
+    Ok(report)
+}

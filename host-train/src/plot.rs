@@ -1,0 +1,181 @@
+//! SVG figures of flights (plotters), each written whole (temporary file, then rename).
+
+use std::path::Path;
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+
+use crate::eval::{write_atomic, FlightLog};
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+fn pe<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("plotting failed: {e:?}")
+}
+
+fn bounds(vals: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.08).max(0.02);
+    (lo - pad, hi + pad)
+}
+
+/// Desired vs flown path of one or more flights: an x–y top view and x, y, z against time.
+/// The desired path is taken from the first log; each log is overlaid with its label.
+pub fn path_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1300, 650)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let (left, right) = root.split_horizontally(650);
+        let all = || logs.iter().flat_map(|(_, l)| l.p_m.iter().chain(l.p_ref_m.iter()));
+        let (x0, x1) = bounds(all().map(|p| p[0]));
+        let (y0, y1) = bounds(all().map(|p| p[1]));
+        // Equal aspect on the top view.
+        let half = 0.5 * (x1 - x0).max(y1 - y0);
+        let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+        let title = logs
+            .first()
+            .map(|(_, l)| format!("{}: top view", l.scenario))
+            .unwrap_or_default();
+        let mut ch = ChartBuilder::on(&left)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)
+            .map_err(pe)?;
+        ch.configure_mesh()
+            .x_desc("x (m)")
+            .y_desc("y (m)")
+            .draw()
+            .map_err(pe)?;
+        if let Some((_, l)) = logs.first() {
+            ch.draw_series(LineSeries::new(
+                l.p_ref_m.iter().map(|p| (p[0], p[1])),
+                BLACK.stroke_width(2),
+            ))
+            .map_err(pe)?
+            .label("desired")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+        }
+        for (i, (name, l)) in logs.iter().enumerate() {
+            let c = PALETTE[i % PALETTE.len()];
+            ch.draw_series(LineSeries::new(l.p_m.iter().map(|p| (p[0], p[1])), c))
+                .map_err(pe)?
+                .label(name.to_string())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+        ch.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(pe)?;
+
+        let t_max = logs
+            .iter()
+            .map(|(_, l)| l.planned_duration_s)
+            .fold(0.1, f64::max);
+        for (axis, area) in right.split_evenly((3, 1)).iter().enumerate() {
+            let (lo, hi) = bounds(all().map(|p| p[axis]));
+            let mut ch = ChartBuilder::on(area)
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d(0.0..t_max, lo..hi)
+                .map_err(pe)?;
+            ch.configure_mesh()
+                .x_desc("t (s)")
+                .y_desc(["x (m)", "y (m)", "z (m)"][axis])
+                .draw()
+                .map_err(pe)?;
+            if let Some((_, l)) = logs.first() {
+                ch.draw_series(LineSeries::new(
+                    l.t_s.iter().zip(&l.p_ref_m).map(|(t, p)| (*t, p[axis])),
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(pe)?;
+            }
+            for (i, (_, l)) in logs.iter().enumerate() {
+                let c = PALETTE[i % PALETTE.len()];
+                ch.draw_series(LineSeries::new(
+                    l.t_s.iter().zip(&l.p_m).map(|(t, p)| (*t, p[axis])),
+                    c,
+                ))
+                .map_err(pe)?;
+            }
+        }
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
+
+/// Position error |p − p*| (cm) against time for one or more flights.
+pub fn error_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (900, 450)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let t_max = logs
+            .iter()
+            .map(|(_, l)| l.planned_duration_s)
+            .fold(0.1, f64::max);
+        let e_max = logs
+            .iter()
+            .flat_map(|(_, l)| l.err_m.iter())
+            .filter(|e| e.is_finite())
+            .fold(0.001, |a: f64, &b| a.max(b))
+            * 100.0
+            * 1.05;
+        let title = logs
+            .first()
+            .map(|(_, l)| format!("{}: position error", l.scenario))
+            .unwrap_or_default();
+        let mut ch = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_max, 0.0..e_max)
+            .map_err(pe)?;
+        ch.configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("|p - p*| (cm)")
+            .draw()
+            .map_err(pe)?;
+        for (i, (name, l)) in logs.iter().enumerate() {
+            let c = PALETTE[i % PALETTE.len()];
+            ch.draw_series(LineSeries::new(
+                l.t_s
+                    .iter()
+                    .zip(&l.err_m)
+                    .filter(|(_, e)| e.is_finite())
+                    .map(|(t, e)| (*t, e * 100.0)),
+                c,
+            ))
+            .map_err(pe)?
+            .label(name.to_string())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+        ch.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(pe)?;
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}

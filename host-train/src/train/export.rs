@@ -1,0 +1,235 @@
+//! Export: the weight blob (θ, φ and the network shapes; written whole through a temporary
+//! file) and the JSON report next to it (`FILE.hfw.json`): configuration, training curve,
+//! held-out N-step prediction errors of the learned and nominal models, the learned J (hover)
+//! and g against the true ones, and the a_j with the true disturbances of their realizations.
+
+use super::data::{Windows, WINDOW_LEN};
+use super::r#loop::{EpochStats, Trained};
+use super::TrainConfig;
+use anyhow::{Context, Result};
+use hamflight::lie;
+use hamflight::model::{
+    rk4_step, true_input_gain, HamiltonianModel, LearnedModel, ModelWeights, NominalModel, State,
+    FEATURES, GRAVITY_M_S2, MASS_KG,
+};
+use nalgebra::{Vector3, Vector4};
+use serde::Serialize;
+use std::io::Write;
+use std::path::Path;
+
+/// Root-mean-square prediction errors at each predicted step of the held-out windows.
+#[derive(Clone, Debug, Serialize)]
+pub struct PredictionErrors {
+    /// ‖p − p̄‖ (m), RMS over windows, for steps 1..N.
+    pub pos_m: Vec<f64>,
+    /// Rotation angle of R̄ Rᵀ (rad).
+    pub rot_rad: Vec<f64>,
+    /// ‖v − v̄‖ (m/s), body frame.
+    pub vel_m_s: Vec<f64>,
+    /// ‖ω − ω̄‖ (rad/s), body frame.
+    pub rate_rad_s: Vec<f64>,
+}
+
+/// One realization's learned a_j next to its true disturbance.
+#[derive(Clone, Debug, Serialize)]
+pub struct RealizationReport {
+    /// The manifest's wind (m/s², world frame).
+    pub true_wind_m_s2: [f32; 3],
+    /// The manifest's rotor efficiencies δᵢ.
+    pub true_rotor_efficiency: [f32; 4],
+    /// The learned a_j.
+    pub a: [f32; FEATURES],
+    /// W(hover) a_j: the learned disturbance wrench at hover [F (N, body); τ (N·m, body)].
+    pub learned_wrench_at_hover: [f32; 6],
+    /// The true disturbance wrench at hover: m w plus the rotor deficits at hover thrust.
+    pub true_wrench_at_hover: [f32; 6],
+}
+
+/// The training report (`FILE.hfw.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainReport {
+    /// The configuration.
+    pub config: TrainConfig,
+    /// Windows used for training and held out.
+    pub train_windows: usize,
+    /// Held-out windows.
+    pub heldout_windows: usize,
+    /// Held-out loss of the initial model (the physical prior).
+    pub initial_val_loss: f64,
+    /// Final held-out loss.
+    pub final_val_loss: f64,
+    /// Wall time of training (s).
+    pub train_time_s: f64,
+    /// The training curve.
+    pub curve: Vec<EpochStats>,
+    /// Held-out errors: learned model with its a_j.
+    pub heldout_learned: PredictionErrors,
+    /// Held-out errors: learned model with a = 0 (no disturbance compensation).
+    pub heldout_learned_no_disturbance: PredictionErrors,
+    /// Held-out errors: the nominal model (true constants, no disturbance).
+    pub heldout_nominal: PredictionErrors,
+    /// Learned J at hover (R = I), kg·m², row-major.
+    pub learned_inertia_hover_kg_m2: [[f32; 3]; 3],
+    /// The true J (kg·m²).
+    pub true_inertia_kg_m2: [[f32; 3]; 3],
+    /// Learned g at hover, rows body force x, y, z, torque x, y, z.
+    pub learned_gain_hover: [[f32; 4]; 6],
+    /// The true g.
+    pub true_gain: [[f32; 4]; 6],
+    /// Per realization: a_j and the true disturbance.
+    pub realizations: Vec<RealizationReport>,
+}
+
+/// N-step prediction errors of `model` on windows `ids`, with a_j from `a` (None: a = 0).
+pub fn prediction_errors<M: HamiltonianModel>(
+    model: &M,
+    data: &Windows,
+    ids: &[usize],
+    a: Option<&[[f32; FEATURES]]>,
+) -> PredictionErrors {
+    let dt = 1.0 / data.sample_hz;
+    let n = WINDOW_LEN - 1;
+    let mut acc = vec![[0f64; 4]; n];
+    for &i in ids {
+        let w = &data.windows[i];
+        let aj = a
+            .and_then(|a| a.get(w.realization).copied())
+            .unwrap_or([0.0; FEATURES]);
+        let u = Vector4::from(w.u);
+        let mut s = w.states[0];
+        for (k, acc) in acc.iter_mut().enumerate() {
+            s = rk4_step(model, &s, &u, &aj, dt);
+            let t = &w.states[k + 1];
+            acc[0] += f64::from((s.p_m - t.p_m).norm_squared());
+            acc[1] += f64::from(lie::geodesic_distance(&t.rot, &s.rot)).powi(2);
+            acc[2] += f64::from((s.v_body_m_s - t.v_body_m_s).norm_squared());
+            acc[3] += f64::from((s.w_body_rad_s - t.w_body_rad_s).norm_squared());
+        }
+    }
+    let m = ids.len().max(1) as f64;
+    let col = |c: usize| acc.iter().map(|a| (a[c] / m).sqrt()).collect();
+    PredictionErrors {
+        pos_m: col(0),
+        rot_rad: col(1),
+        vel_m_s: col(2),
+        rate_rad_s: col(3),
+    }
+}
+
+/// The CF2X's rotor positions (x, y) (m) and reaction-torque signs, rotors 1..4 (DESIGN).
+const ROTORS: [(f32, f32, f32); 4] = [
+    (0.028, -0.028, -1.0),
+    (-0.028, -0.028, 1.0),
+    (-0.028, 0.028, -1.0),
+    (0.028, 0.028, 1.0),
+];
+/// km / kf (m): reaction torque per newton of thrust.
+const KM_OVER_KF_M: f32 = 7.94e-12 / 3.16e-10;
+
+/// The true disturbance wrench at hover (R = I): body force m w + Σ ΔFᵢ e₃, torque Σ rᵢ × ΔFᵢ e₃
+/// plus the reaction-torque deficit, with ΔFᵢ = −(1 − δᵢ) m g / 4 at hover thrust.
+pub fn true_wrench_at_hover(wind_m_s2: &[f32; 3], eff: &[f32; 4]) -> [f32; 6] {
+    let mut f = Vector3::from(*wind_m_s2) * MASS_KG;
+    let mut t = Vector3::zeros();
+    for (&(x, y, s), &d) in ROTORS.iter().zip(eff.iter()) {
+        let df = -(1.0 - d) * MASS_KG * GRAVITY_M_S2 / 4.0;
+        f.z += df;
+        t += Vector3::new(y * df, -x * df, s * KM_OVER_KF_M * df);
+    }
+    [f.x, f.y, f.z, t.x, t.y, t.z]
+}
+
+/// Builds the report.
+pub fn report(
+    cfg: &TrainConfig,
+    data: &Windows,
+    train_ids: &[usize],
+    heldout: &[usize],
+    trained: &Trained,
+) -> TrainReport {
+    let learned = LearnedModel::new(trained.weights);
+    let nominal = NominalModel::default();
+    let hover = State::default();
+    let terms = learned.terms(&hover);
+    let j = terms
+        .inertia_inv
+        .try_inverse()
+        .unwrap_or_else(nalgebra::Matrix3::zeros);
+    let true_j = nominal.inertia_kg_m2;
+    let realizations = data
+        .realizations
+        .iter()
+        .zip(trained.a.iter())
+        .map(|(r, a)| {
+            let d = terms.features * nalgebra::SVector::<f32, FEATURES>::from_row_slice(a);
+            RealizationReport {
+                true_wind_m_s2: r.wind_m_s2,
+                true_rotor_efficiency: r.rotor_efficiency,
+                a: *a,
+                learned_wrench_at_hover: std::array::from_fn(|k| d[k]),
+                true_wrench_at_hover: true_wrench_at_hover(&r.wind_m_s2, &r.rotor_efficiency),
+            }
+        })
+        .collect();
+    let g = terms.gain;
+    let tg = true_input_gain();
+    TrainReport {
+        config: cfg.clone(),
+        train_windows: train_ids.len(),
+        heldout_windows: heldout.len(),
+        initial_val_loss: trained.initial_val_loss,
+        final_val_loss: trained.curve.last().map_or(f64::NAN, |e| e.val_loss),
+        train_time_s: trained.curve.last().map_or(0.0, |e| e.elapsed_s),
+        curve: trained.curve.clone(),
+        heldout_learned: prediction_errors(&learned, data, heldout, Some(&trained.a)),
+        heldout_learned_no_disturbance: prediction_errors(&learned, data, heldout, None),
+        heldout_nominal: prediction_errors(&nominal, data, heldout, None),
+        learned_inertia_hover_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| j[(r, c)])),
+        true_inertia_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| true_j[(r, c)])),
+        learned_gain_hover: std::array::from_fn(|r| std::array::from_fn(|c| g[(r, c)])),
+        true_gain: std::array::from_fn(|r| std::array::from_fn(|c| tg[(r, c)])),
+        realizations,
+    }
+}
+
+/// Writes `bytes` to `path` whole: a temporary file in the same directory, then a rename.
+///
+/// # Errors
+/// Any I/O failure, naming the file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "weights".into());
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| -> Result<()> {
+        let mut f =
+            std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        f.write_all(bytes)
+            .with_context(|| format!("writing {}", tmp.display()))?;
+        f.sync_all().ok();
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Writes the blob to `out` and the report to `out.json` (appending `.json` to the file name).
+///
+/// # Errors
+/// Any I/O failure.
+pub fn write(out: &Path, weights: &ModelWeights, report: &TrainReport) -> Result<()> {
+    write_atomic(out, &hamflight::blob::encode(weights))?;
+    let mut json_path = out.as_os_str().to_owned();
+    json_path.push(".json");
+    let json = serde_json::to_vec_pretty(report)?;
+    write_atomic(Path::new(&json_path), &json)
+}
