@@ -1,0 +1,407 @@
+//! Processor in the loop: the firmware's control loop, built for QEMU's `netduinoplus2`
+//! (STM32F405), flies paper-spiral against the SITL plant over its UART, in lock-step (the plant
+//! advances one control period per telemetry frame). The flown path must match the same
+//! controller run natively on the host within 1 mm, and track at least as well.
+//!
+//! Needs `qemu-system-arm` (Debian: `apt-get install qemu-system-arm`). Without it the test
+//! prints that it skipped — except under `CI=true`, where it fails.
+//!
+//! `HAMFLIGHT_PIL_SECONDS` sets the simulated flight length (default 12 s, at least 10);
+//! `HAMFLIGHT_PIL_SCENARIO` another scenario file (default `scenarios/paper-spiral.toml`).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use hamflight::model::NominalModel;
+use hamflight::{FlightController, Gains};
+use host_train::controller::{Controller, TrajectoryPoint};
+use host_train::eval::{fly, Report};
+use host_train::plant::PlantState;
+use host_train::scenario::Scenario;
+
+/// The firmware's link frames, compiled from the very same file.
+#[allow(dead_code)]
+#[path = "../../firmware/src/link.rs"]
+mod link;
+
+use link::{CostUnit, Downlink, FrameDecoder, Hello, Input, Uplink, WireSetpoint, WireState};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The model the firmware flies (firmware/src/control_loop.rs `load_model`), built on the host.
+fn native_model() -> NominalModel {
+    NominalModel::default()
+}
+
+/// The same controller on the host: the core compiled for x86-64, stepped exactly as the
+/// firmware's control loop steps it (dt = 1 / loop rate as f32).
+struct NativeController {
+    inner: FlightController<NominalModel>,
+    dt_s: f32,
+}
+
+impl Controller for NativeController {
+    fn name(&self) -> &str {
+        "native"
+    }
+
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    fn step(&mut self, _t: f64, state: &PlantState, r: &TrajectoryPoint, _dt: f64) -> [f64; 4] {
+        let out = self.inner.step(&state.into(), &r.into(), self.dt_s);
+        out.rotors.rpm.map(f64::from)
+    }
+
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        Some(self.inner.estimate().iter().map(|&x| f64::from(x)).collect())
+    }
+}
+
+fn qemu_available() -> bool {
+    Command::new("qemu-system-arm")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false)
+}
+
+/// Builds the QEMU firmware (release) in its own workspace and returns the ELF.
+fn build_firmware() -> PathBuf {
+    let dir = repo().join("firmware");
+    let mut cmd = Command::new("cargo");
+    cmd.current_dir(&dir)
+        .args(["build", "--release", "--features", "qemu", "--bin", "qemu"]);
+    // The outer cargo's settings must not leak into the firmware's own workspace.
+    for var in [
+        "CARGO_TARGET_DIR",
+        "CARGO_BUILD_TARGET",
+        "RUSTFLAGS",
+        "CARGO_ENCODED_RUSTFLAGS",
+        "RUSTUP_TOOLCHAIN",
+        "CARGO_MAKEFLAGS",
+    ] {
+        cmd.env_remove(var);
+    }
+    let out = cmd.output().expect("cannot run cargo to build the firmware");
+    assert!(
+        out.status.success(),
+        "firmware build failed (cd firmware && cargo build --release --features qemu --bin qemu):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    dir.join("target/thumbv7em-none-eabihf/release/qemu")
+}
+
+/// QEMU with its output collected; killed on drop.
+struct Qemu {
+    child: Child,
+    output: Arc<Mutex<String>>,
+}
+
+impl Qemu {
+    fn start(elf: &Path, port: u16) -> Self {
+        let mut child = Command::new("qemu-system-arm")
+            .args(["-M", "netduinoplus2", "-nographic", "-monitor", "none"])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            // Deterministic instruction counting: SysTick then measures instructions.
+            .args(["-icount", "shift=0"])
+            .args(["-serial", &format!("tcp:127.0.0.1:{port}")])
+            .arg("-kernel")
+            .arg(elf)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("cannot start qemu-system-arm");
+        let output = Arc::new(Mutex::new(String::new()));
+        for stream in [
+            child.stdout.take().map(|s| Box::new(s) as Box<dyn Read + Send>),
+            child.stderr.take().map(|s| Box::new(s) as Box<dyn Read + Send>),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            let out = Arc::clone(&output);
+            std::thread::spawn(move || {
+                for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                    if let Ok(mut o) = out.lock() {
+                        o.push_str(&line);
+                        o.push('\n');
+                    }
+                }
+            });
+        }
+        Self { child, output }
+    }
+
+    fn output(&self) -> String {
+        self.output.lock().map(|o| o.clone()).unwrap_or_default()
+    }
+
+    /// Waits for QEMU to exit by itself (after Finish); true if it did in time.
+    fn wait_exit(&mut self, timeout: Duration) -> bool {
+        let t0 = Instant::now();
+        while t0.elapsed() < timeout {
+            if let Ok(Some(st)) = self.child.try_wait() {
+                return st.success();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The host end of the firmware's link.
+struct LinkPort {
+    stream: TcpStream,
+    dec: FrameDecoder,
+    bad_frames: u32,
+}
+
+impl LinkPort {
+    fn send(&mut self, msg: &Uplink) {
+        let mut buf = [0u8; link::MAX_FRAME];
+        let n = link::encode(msg, &mut buf).expect("uplink frame fits");
+        self.stream.write_all(&buf[..n]).expect("write to the firmware's UART");
+    }
+
+    /// Next message from the firmware, or None on timeout.
+    fn recv(&mut self, timeout: Duration) -> Option<Downlink> {
+        let t0 = Instant::now();
+        let mut byte = [0u8; 1];
+        let mut reader = &self.stream;
+        loop {
+            let left = timeout.checked_sub(t0.elapsed())?;
+            reader
+                .set_read_timeout(Some(left.max(Duration::from_millis(1))))
+                .ok()?;
+            match reader.read(&mut byte) {
+                Ok(1) => match self.dec.push::<Downlink>(byte[0]) {
+                    Some(Ok(msg)) => return Some(msg),
+                    Some(Err(_)) => self.bad_frames += 1,
+                    None => {}
+                },
+                Ok(_) => return None, // closed
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) =>
+                {
+                    return None
+                }
+                Err(_) => return None,
+            }
+        }
+    }
+}
+
+/// The firmware as a host [`Controller`]: each step is one Input frame out, one Telemetry back.
+struct QemuController {
+    port: LinkPort,
+    seq: u32,
+    costs: Vec<u32>,
+    last_a: Vec<f64>,
+    faults_seen: u16,
+}
+
+impl Controller for QemuController {
+    fn name(&self) -> &str {
+        "qemu-firmware"
+    }
+
+    fn reset(&mut self) {}
+
+    fn step(&mut self, _t: f64, state: &PlantState, r: &TrajectoryPoint, _dt: f64) -> [f64; 4] {
+        self.seq += 1;
+        let input = Input {
+            seq: self.seq,
+            state: WireState::from(&hamflight::State::from(state)),
+            setpoint: WireSetpoint::from(&hamflight::Setpoint::from(r)),
+        };
+        self.port.send(&Uplink::Input(input));
+        loop {
+            match self.port.recv(Duration::from_secs(10)) {
+                Some(Downlink::Telemetry(t)) if t.seq == self.seq => {
+                    self.costs.push(t.step_cost);
+                    self.last_a = t.a.iter().map(|&x| f64::from(x)).collect();
+                    self.faults_seen |= t.faults;
+                    return t.rpm.map(f64::from);
+                }
+                Some(_) => {} // status frames, stale telemetry
+                None => panic!(
+                    "no telemetry from the firmware for input {} within 10 s",
+                    self.seq
+                ),
+            }
+        }
+    }
+
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        Some(self.last_a.clone())
+    }
+}
+
+fn pil_seconds() -> f64 {
+    std::env::var("HAMFLIGHT_PIL_SECONDS")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+        .unwrap_or(12.0)
+        .max(10.0)
+}
+
+#[test]
+fn paper_spiral_on_qemu_matches_native() {
+    if !qemu_available() {
+        let how = "install it with `apt-get install qemu-system-arm` (Debian/Ubuntu)";
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("qemu-system-arm is not installed, so the processor-in-the-loop test cannot run; {how}");
+        }
+        eprintln!("SKIPPED pil_qemu: qemu-system-arm not found; {how}");
+        return;
+    }
+    let path = std::env::var_os("HAMFLIGHT_PIL_SCENARIO")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("scenarios/paper-spiral.toml"));
+    let mut scenario = Scenario::load(&path)
+        .unwrap_or_else(|e| panic!("cannot load {}: {e:#}", path.display()));
+    scenario.spec.duration_s = scenario.spec.duration_s.min(pil_seconds());
+    assert!(scenario.spec.duration_s >= 10.0);
+
+    let elf = build_firmware();
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind a local port for the UART");
+    let port = listener.local_addr().expect("local addr").port();
+    let mut qemu = Qemu::start(&elf, port);
+    listener.set_nonblocking(true).expect("nonblocking listener");
+    let t0 = Instant::now();
+    let stream = loop {
+        match listener.accept() {
+            Ok((s, _)) => break s,
+            Err(_) if t0.elapsed() < Duration::from_secs(20) => {
+                std::thread::sleep(Duration::from_millis(10))
+            }
+            Err(e) => panic!("QEMU did not connect its UART: {e}\n{}", qemu.output()),
+        }
+    };
+    stream.set_nonblocking(false).expect("blocking stream");
+    stream.set_nodelay(true).expect("nodelay");
+    let mut port = LinkPort {
+        stream,
+        dec: FrameDecoder::new(),
+        bad_frames: 0,
+    };
+
+    // The boot Hello may have gone out before the connection: ask again.
+    port.send(&Uplink::Hello);
+    let hello: Hello = loop {
+        match port.recv(Duration::from_secs(10)) {
+            Some(Downlink::Hello(h)) => break h,
+            Some(_) => {}
+            None => panic!("no Hello from the firmware\n{}", qemu.output()),
+        }
+    };
+    assert!(hello.blob_ok, "the firmware rejected its weight blob\n{}", qemu.output());
+    assert_eq!(
+        f64::from(hello.loop_hz),
+        scenario.spec.control_hz,
+        "firmware loop rate differs from the scenario's control rate"
+    );
+    assert_eq!(hello.cost_unit, CostUnit::QemuSysTick168MHz);
+
+    let mut fw = QemuController {
+        port,
+        seq: 0,
+        costs: Vec::new(),
+        last_a: Vec::new(),
+        faults_seen: 0,
+    };
+    let log_fw = fly(&scenario, &mut fw);
+    fw.port.send(&Uplink::Finish);
+    let report = loop {
+        match fw.port.recv(Duration::from_secs(10)) {
+            Some(Downlink::Report(r)) => break r,
+            Some(_) => {}
+            None => panic!("no Report after Finish\n{}", qemu.output()),
+        }
+    };
+    assert!(
+        qemu.wait_exit(Duration::from_secs(10)),
+        "QEMU did not exit cleanly after Finish\n{}",
+        qemu.output()
+    );
+
+    let mut native = NativeController {
+        inner: FlightController::new(native_model(), Gains::default()),
+        dt_s: 1.0 / hello.loop_hz as f32,
+    };
+    let log_host = fly(&scenario, &mut native);
+
+    let r_fw = Report::from_log(&log_fw, Some(&path));
+    let r_host = Report::from_log(&log_host, Some(&path));
+    let max_dev = log_fw
+        .p_m
+        .iter()
+        .zip(&log_host.p_m)
+        .map(|(a, b)| {
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max);
+    let insns: Vec<f64> = fw.costs.iter().map(|&c| f64::from(c) * 1000.0 / 168.0).collect();
+    let mean = insns.iter().sum::<f64>() / insns.len().max(1) as f64;
+    let max = insns.iter().copied().fold(0.0, f64::max);
+    println!(
+        "PIL paper-spiral {:.1} s: {} steps, max |p_qemu - p_host| = {:.3e} m, \
+         RMSE(t>=5 s) qemu {:.4} m / host {:.4} m, whole {:.4} / {:.4} m",
+        scenario.spec.duration_s,
+        fw.costs.len(),
+        max_dev,
+        r_fw.rmse_pos_window_m.unwrap_or(f64::NAN),
+        r_host.rmse_pos_window_m.unwrap_or(f64::NAN),
+        r_fw.rmse_pos_m,
+        r_host.rmse_pos_m
+    );
+    println!(
+        "PIL step cost: mean {mean:.0} instructions, max {max:.0} (≈ {:.1} / {:.1} µs at 168 MHz, 1 instruction/cycle); \
+         stack peak {} of {} bytes; bad frames fw {} / host {}; watchdog trips {}",
+        mean / 168.0,
+        max / 168.0,
+        report.stack_peak_bytes,
+        report.stack_size_bytes,
+        report.bad_frames,
+        fw.port.bad_frames,
+        report.watchdog_trips
+    );
+
+    assert_eq!(log_fw.p_m.len(), log_host.p_m.len(), "flights of different length");
+    assert!(!r_host.crashed, "the native controller crashed: {r_host:?}");
+    assert!(!r_fw.crashed, "the QEMU firmware crashed: {r_fw:?}");
+    assert!(
+        max_dev <= 1e-3,
+        "flown path differs from the native run by {max_dev:.3e} m (> 1 mm)"
+    );
+    assert!(
+        r_fw.rmse_pos_m <= r_host.rmse_pos_m + 1e-4,
+        "firmware tracks worse than native: {} vs {} m",
+        r_fw.rmse_pos_m,
+        r_host.rmse_pos_m
+    );
+    assert_eq!(report.bad_frames, 0, "the firmware dropped frames");
+    assert_eq!(fw.port.bad_frames, 0, "the host dropped frames");
+    assert_eq!(report.steps as usize, fw.costs.len());
+}

@@ -1,0 +1,226 @@
+//! Parity: the core's f32 inference (`LearnedModel`) and the host's burn training model give
+//! the same J⁻¹, g, W and state derivative (paper eq. 1–2) on random states for the same weights.
+
+mod train_common;
+
+use burn::tensor::{Device, Int, Tensor, TensorData};
+use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, State, FEATURES};
+use host_train::train::model::{to_vec, Consts, Forcing, TModel};
+use host_train::train::r#loop::init_weights;
+use nalgebra::Vector4;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn rel_err(a: &[f32], b: &[f32]) -> f32 {
+    let num: f32 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f32>()
+        .sqrt();
+    let den: f32 = b.iter().map(|y| y * y).sum::<f32>().sqrt().max(1e-12);
+    num / den
+}
+
+/// Weights far from the prior, so every network term matters.
+fn weights() -> ModelWeights {
+    let mut w = init_weights(11, 1.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for v in w
+        .inertia
+        .l2
+        .bias
+        .iter_mut()
+        .chain(w.gain.l2.bias.iter_mut())
+    {
+        *v += rng.gen_range(-0.3..0.3);
+    }
+    for v in w
+        .inertia
+        .l0
+        .bias
+        .iter_mut()
+        .chain(w.disturbance.l1.bias.iter_mut())
+    {
+        *v = rng.gen_range(-0.5..0.5);
+    }
+    w
+}
+
+fn tensor2(v: Vec<f32>, shape: [usize; 2], d: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(v, shape), d)
+}
+
+#[test]
+fn core_and_host_models_agree() {
+    let device = Device::flex();
+    let w = weights();
+    let core = LearnedModel::new(w);
+    let host = TModel::from_core(&w, &device);
+    let c = Consts::new(&device);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let n = 16;
+    let states: Vec<State> = (0..n)
+        .map(|_| train_common::random_state(&mut rng, 1.0))
+        .collect();
+    let us: Vec<Vector4<f32>> = (0..n)
+        .map(|_| train_common::random_control(&mut rng))
+        .collect();
+    let a: Vec<[f32; FEATURES]> = (0..n)
+        .map(|_| std::array::from_fn(|_| rng.gen_range(-1.0..1.0)))
+        .collect();
+
+    let flat = |f: &dyn Fn(&State) -> Vec<f32>| states.iter().flat_map(f).collect::<Vec<f32>>();
+    let p = tensor2(flat(&|s| s.p_m.as_slice().to_vec()), [n, 3], &device);
+    let rot: Tensor<3> = Tensor::from_data(
+        TensorData::new(
+            flat(&|s| hamflight::model::learned::rot_input(&s.rot).to_vec()),
+            [n, 3, 3],
+        ),
+        &device,
+    );
+    let v = tensor2(flat(&|s| s.v_body_m_s.as_slice().to_vec()), [n, 3], &device);
+    let om = tensor2(
+        flat(&|s| s.w_body_rad_s.as_slice().to_vec()),
+        [n, 3],
+        &device,
+    );
+    let u = tensor2(
+        us.iter().flat_map(|u| u.as_slice().to_vec()).collect(),
+        [n, 4],
+        &device,
+    );
+    let a_all = tensor2(
+        a.iter().flatten().copied().collect(),
+        [n, FEATURES],
+        &device,
+    );
+    let idx: Tensor<1, Int> = Tensor::from_data(
+        TensorData::new((0..n as i64).collect::<Vec<_>>(), [n]),
+        &device,
+    );
+    let forcing = Forcing::new(&c, u.clone(), a_all, idx);
+
+    // J⁻¹, g, W.
+    let jinv_h = to_vec(&host.inertia_inv(&c, &rot).jinv);
+    let w_h = to_vec(&host.features(&rot, v.clone(), om.clone()));
+    let mut jinv_c = Vec::new();
+    let mut w_c = Vec::new();
+    for s in &states {
+        let t = core.terms(s);
+        jinv_c.extend(t.inertia_inv.transpose().iter().copied()); // row-major
+        w_c.extend(t.features.transpose().iter().copied());
+    }
+    assert!(
+        rel_err(&jinv_h, &jinv_c) < 1e-4,
+        "J⁻¹ {}",
+        rel_err(&jinv_h, &jinv_c)
+    );
+    assert!(rel_err(&w_h, &w_c) < 1e-4, "W {}", rel_err(&w_h, &w_c));
+
+    // g u (both columns scales at once: the control wrench of random controls).
+    let (fu, tu) = host.control_wrench(&c, &rot, forcing.u_norm.clone());
+    let (fu, tu) = (to_vec(&fu), to_vec(&tu));
+    for (i, (s, uu)) in states.iter().zip(&us).enumerate() {
+        let gu = core.terms(s).gain * uu;
+        let fh = &fu[3 * i..3 * i + 3];
+        let th = &tu[3 * i..3 * i + 3];
+        assert!(rel_err(fh, &gu.as_slice()[..3]) < 1e-4);
+        assert!(
+            rel_err(th, &gu.as_slice()[3..]) < 1e-4,
+            "{th:?} vs {:?}",
+            &gu.as_slice()[3..]
+        );
+    }
+    // g itself, column by column, with unit controls.
+    for k in 0..4 {
+        let mut e = vec![0f32; 4 * n];
+        for i in 0..n {
+            e[4 * i + k] = hamflight::model::learned::CONTROL_SCALE[k];
+        }
+        let un = tensor2(e, [n, 4], &device)
+            * tensor2(
+                hamflight::model::learned::CONTROL_SCALE
+                    .iter()
+                    .map(|c| 1.0 / c)
+                    .collect(),
+                [1, 4],
+                &device,
+            );
+        let (f, t) = host.control_wrench(&c, &rot, un);
+        let (f, t) = (to_vec(&f), to_vec(&t));
+        for (i, s) in states.iter().enumerate() {
+            let col = core.terms(s).gain.column(k) * hamflight::model::learned::CONTROL_SCALE[k];
+            let h: Vec<f32> = f[3 * i..3 * i + 3]
+                .iter()
+                .chain(&t[3 * i..3 * i + 3])
+                .copied()
+                .collect();
+            assert!(rel_err(&h, col.as_slice()) < 1e-4, "g column {k}");
+        }
+    }
+
+    // The state derivative, including ∂H/∂rᵢ (VJP) and d/dt J⁻¹ (JVP).
+    let (pd, rd, vd, wd) = host.state_derivative(&c, p, rot, v, om, &forcing);
+    let (pd, rd, vd, wd) = (to_vec(&pd), to_vec(&rd), to_vec(&vd), to_vec(&wd));
+    let (mut pc, mut rc, mut vc, mut wc) = (vec![], vec![], vec![], vec![]);
+    for ((s, uu), aj) in states.iter().zip(&us).zip(&a) {
+        let d = core.dynamics(s, uu, aj);
+        pc.extend_from_slice(d.p_dot_m_s.as_slice());
+        rc.extend(d.rot_dot.transpose().iter().copied());
+        vc.extend_from_slice(d.v_dot_m_s2.as_slice());
+        wc.extend_from_slice(d.w_dot_rad_s2.as_slice());
+    }
+    assert!(rel_err(&pd, &pc) < 1e-4, "ṗ {}", rel_err(&pd, &pc));
+    assert!(rel_err(&rd, &rc) < 1e-4, "Ṙ {}", rel_err(&rd, &rc));
+    assert!(rel_err(&vd, &vc) < 1e-4, "v̇ {}", rel_err(&vd, &vc));
+    assert!(rel_err(&wd, &wc) < 1e-4, "ω̇ {}", rel_err(&wd, &wc));
+}
+
+#[test]
+fn host_network_jacobians_match_finite_differences() {
+    let device = Device::flex();
+    let w = weights();
+    let host = TModel::from_core(&w, &device);
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let x: Vec<f32> = (0..9).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let dx: Vec<f32> = (0..9).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let dy: Vec<f32> = (0..6).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let xt = tensor2(x.clone(), [1, 9], &device);
+    let tr = host.inertia.forward(xt);
+    let jvp = to_vec(&host.inertia.jvp(&tr, tensor2(dx.clone(), [1, 9], &device)));
+    let vjp = to_vec(&host.inertia.vjp(&tr, tensor2(dy.clone(), [1, 6], &device)));
+    let h = 1e-2f32;
+    let f = |x: &[f32]| to_vec(&host.inertia.forward(tensor2(x.to_vec(), [1, 9], &device)).y);
+    let shift = |s: f32| {
+        x.iter()
+            .zip(&dx)
+            .map(|(a, b)| a + s * b)
+            .collect::<Vec<_>>()
+    };
+    let (yp, ym) = (f(&shift(h)), f(&shift(-h)));
+    let fd: Vec<f32> = yp
+        .iter()
+        .zip(&ym)
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect();
+    assert!(rel_err(&jvp, &fd) < 1e-3, "JVP {jvp:?} vs {fd:?}");
+    for i in 0..9 {
+        let mut xp = x.clone();
+        xp[i] += h;
+        let mut xm = x.clone();
+        xm[i] -= h;
+        let (yp, ym) = (f(&xp), f(&xm));
+        let g: f32 = yp
+            .iter()
+            .zip(&ym)
+            .zip(&dy)
+            .map(|((a, b), d)| d * (a - b) / (2.0 * h))
+            .sum();
+        assert!(
+            (g - vjp[i]).abs() < 1e-3 * (1.0 + g.abs()),
+            "VJP[{i}] {} vs {g}",
+            vjp[i]
+        );
+    }
+}
