@@ -504,7 +504,10 @@ fn load_csv(path: &Path, window_len: usize) -> Result<Vec<Window>> {
             n = k + 1;
         }
         if n != NCOLS {
-            bail!("`{}` line {ln}: expected {NCOLS} columns, got {n}", path.display());
+            bail!(
+                "`{}` line {ln}: expected {NCOLS} columns, got {n}",
+                path.display()
+            );
         }
         let (w, step) = (row[0] as usize, row[1] as usize);
         if step == 0 {
@@ -524,7 +527,10 @@ fn load_csv(path: &Path, window_len: usize) -> Result<Vec<Window>> {
         }
         let nwin = windows.len();
         let Some(win) = windows.last_mut() else {
-            bail!("`{}` line {ln}: a window must start at step 0", path.display());
+            bail!(
+                "`{}` line {ln}: a window must start at step 0",
+                path.display()
+            );
         };
         if w + 1 != nwin || step != win.states.len() || step >= window_len {
             bail!(

@@ -112,10 +112,12 @@ pub fn fly_with_progress(
         log.t_s.push(t);
         log.p_m.push(truth.p_m.into());
         log.p_ref_m.push(r.p_m.into());
-        log.err_m.push(if err.is_finite() { err } else { f64::INFINITY });
+        log.err_m
+            .push(if err.is_finite() { err } else { f64::INFINITY });
         log.adaptation
             .push(ctrl.adaptation_estimate().unwrap_or_default());
-        if !truth.is_finite() || !(err <= CRASH_ERR_M) || truth.p_m.z < 0.0 {
+        let err_ok = err.is_finite() && err <= CRASH_ERR_M;
+        if !truth.is_finite() || !err_ok || truth.p_m.z < 0.0 {
             log.rpm.push(last_cmd);
             log.crash_time_s = Some(t);
             break;

@@ -103,7 +103,13 @@ impl VehicleParams {
     /// Clamp a rotor command to `[0, max_rpm]` (non-finite entries become 0).
     pub fn clamp_rpm(&self, rpm: [f64; 4]) -> [f64; 4] {
         let max = self.max_rpm();
-        rpm.map(|r| if r.is_finite() { r.clamp(0.0, max) } else { 0.0 })
+        rpm.map(|r| {
+            if r.is_finite() {
+                r.clamp(0.0, max)
+            } else {
+                0.0
+            }
+        })
     }
 
     /// Nominal wrench `u = [f; τx; τy; τz]` (N, N·m, N·m, N·m) of a rotor command (rpm),
@@ -175,7 +181,11 @@ impl VehicleParams {
         let mn = d.iter().cloned().fold(f64::MAX, f64::min);
         let lo = -mn;
         let hi = smax - mx;
-        let b = if lo <= hi { base.clamp(lo, hi) } else { 0.5 * (lo + hi) };
+        let b = if lo <= hi {
+            base.clamp(lo, hi)
+        } else {
+            0.5 * (lo + hi)
+        };
         d.map(|x| (b + x).clamp(0.0, smax).sqrt())
     }
 }
@@ -304,7 +314,10 @@ impl PlantState {
     /// Kinetic energy ½ m |v|² + ½ ωᵀ J ω (J).
     pub fn kinetic_energy(&self, params: &VehicleParams) -> f64 {
         0.5 * params.mass_kg * self.v_body_m_s.norm_squared()
-            + 0.5 * self.w_body_rad_s.dot(&(params.inertia() * self.w_body_rad_s))
+            + 0.5
+                * self
+                    .w_body_rad_s
+                    .dot(&(params.inertia() * self.w_body_rad_s))
     }
 
     /// True if every component is finite.
@@ -347,14 +360,21 @@ pub fn hat(x: &Vector3<f64>) -> Matrix3<f64> {
 
 /// Inverse of [`hat`] on the skew part of `m`: vee(m) = ½ (m − mᵀ)^∨.
 pub fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
-    0.5 * Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)])
+    0.5 * Vector3::new(
+        m[(2, 1)] - m[(1, 2)],
+        m[(0, 2)] - m[(2, 0)],
+        m[(1, 0)] - m[(0, 1)],
+    )
 }
 
 /// Exponential map so(3) → SO(3) (Rodrigues), accurate for small angles.
 pub fn so3_exp(theta: &Vector3<f64>) -> Matrix3<f64> {
     let a2 = theta.norm_squared();
     let (sa, ca) = if a2 < 1e-8 {
-        (1.0 - a2 / 6.0 + a2 * a2 / 120.0, 0.5 - a2 / 24.0 + a2 * a2 / 720.0)
+        (
+            1.0 - a2 / 6.0 + a2 * a2 / 120.0,
+            0.5 - a2 / 24.0 + a2 * a2 / 720.0,
+        )
     } else {
         let a = a2.sqrt();
         (a.sin() / a, (1.0 - a.cos()) / a2)
@@ -508,7 +528,8 @@ impl Plant {
             ty -= ROTOR_XY_SIGN[i][0] * a * thrust[i];
         }
         let m = prm.mass_kg;
-        let ext_world = m * (self.disturbance.wind_at(t_s) - Vector3::new(0.0, 0.0, prm.gravity_m_s2));
+        let ext_world =
+            m * (self.disturbance.wind_at(t_s) - Vector3::new(0.0, 0.0, prm.gravity_m_s2));
         let mut force = Vector3::new(0.0, 0.0, f) + s.rot.transpose() * ext_world;
         if self.effects.rotor_drag {
             let c = Vector3::from(prm.drag_coeff);
@@ -563,8 +584,8 @@ impl Plant {
                 s.p_m += d.p * (c * h);
                 s.v_body_m_s += d.v * (c * h);
                 s.w_body_rad_s += d.w * (c * h);
-                for i in 0..4 {
-                    rotor[i] += d.rotor[i] * c * h;
+                for (r, dr) in rotor.iter_mut().zip(&d.rotor) {
+                    *r += dr * c * h;
                 }
                 s.rot = r0 * so3_exp(th);
             }

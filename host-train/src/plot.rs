@@ -41,7 +41,10 @@ pub fn path_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
         let root = SVGBackend::with_string(&mut buf, (1300, 650)).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
         let (left, right) = root.split_horizontally(650);
-        let all = || logs.iter().flat_map(|(_, l)| l.p_m.iter().chain(l.p_ref_m.iter()));
+        let all = || {
+            logs.iter()
+                .flat_map(|(_, l)| l.p_m.iter().chain(l.p_ref_m.iter()))
+        };
         let (x0, x1) = bounds(all().map(|p| p[0]));
         let (y0, y1) = bounds(all().map(|p| p[1]));
         // Equal aspect on the top view.

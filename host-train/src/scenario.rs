@@ -231,7 +231,10 @@ impl Scenario {
             .map_err(|e| anyhow::anyhow!("bad scenario file `{origin}`: {e}"))?;
         validate(&spec).with_context(|| format!("bad scenario file `{origin}`"))?;
         Ok(Self {
-            name: spec.name.clone().unwrap_or_else(|| default_name.to_string()),
+            name: spec
+                .name
+                .clone()
+                .unwrap_or_else(|| default_name.to_string()),
             path: None,
             spec,
             vehicle: VehicleParams::cf2x(),
@@ -354,7 +357,11 @@ pub fn trajectory_point(tr: &Trajectory, t: f64) -> TrajectoryPoint {
             let in_motion = tt - k as f64 * leg >= *hold_s;
             let (s, s1, s2, s3) = septic(tau);
             let d = b - a;
-            let (s1, s2, s3) = if in_motion { (s1, s2, s3) } else { (0.0, 0.0, 0.0) };
+            let (s1, s2, s3) = if in_motion {
+                (s1, s2, s3)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
             TrajectoryPoint {
                 p_m: a + d * s,
                 v_m_s: d * (s1 / segment_s),
@@ -400,10 +407,16 @@ fn finite_all(xs: &[f64]) -> bool {
 
 fn validate(s: &ScenarioSpec) -> Result<()> {
     if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
-        bail!("key `duration_s`: expected a positive number of seconds, got {}", s.duration_s);
+        bail!(
+            "key `duration_s`: expected a positive number of seconds, got {}",
+            s.duration_s
+        );
     }
     if !(s.control_hz.is_finite() && s.control_hz > 0.0) {
-        bail!("key `control_hz`: expected a positive rate in Hz, got {}", s.control_hz);
+        bail!(
+            "key `control_hz`: expected a positive rate in Hz, got {}",
+            s.control_hz
+        );
     }
     if !(s.physics_hz.is_finite() && s.physics_hz >= 1000.0) {
         bail!(
@@ -479,7 +492,11 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
     if !finite_all(&d.wind_m_s2) {
         bail!("key `disturbance.wind_m_s2`: expected three finite numbers (m/s²)");
     }
-    if !d.rotor_efficiency.iter().all(|x| x.is_finite() && (0.0..=2.0).contains(x)) {
+    if !d
+        .rotor_efficiency
+        .iter()
+        .all(|x| x.is_finite() && (0.0..=2.0).contains(x))
+    {
         bail!(
             "key `disturbance.rotor_efficiency`: expected four numbers in [0, 2], got {:?}",
             d.rotor_efficiency
@@ -490,7 +507,10 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
     }
     let e = &s.effects;
     if !(e.motor_tau_s.is_finite() && e.motor_tau_s >= 0.0) {
-        bail!("key `effects.motor_tau_s`: expected a time constant ≥ 0 s, got {}", e.motor_tau_s);
+        bail!(
+            "key `effects.motor_tau_s`: expected a time constant ≥ 0 s, got {}",
+            e.motor_tau_s
+        );
     }
     let n = &e.noise;
     if ![n.pos_m, n.vel_m_s, n.att_rad, n.rate_rad_s]

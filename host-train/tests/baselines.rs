@@ -75,10 +75,8 @@ fn paper_spiral_is_as_designed() {
     for t in [0.0, 3.7, 12.0, 30.0] {
         let r = s.reference(t);
         let w = std::f64::consts::TAU * t / 10.0;
-        let p = [0.5 * w.cos(), 0.5 * w.sin(), 0.5 + 0.03 * t];
-        for i in 0..3 {
-            assert!((r.p_m[i] - p[i]).abs() < 1e-12);
-        }
+        let p = nalgebra::Vector3::new(0.5 * w.cos(), 0.5 * w.sin(), 0.5 + 0.03 * t);
+        assert!((r.p_m - p).norm() < 1e-12);
         assert_eq!(r.yaw_rad, 0.0);
     }
     let s0 = s.initial_state();
@@ -94,34 +92,62 @@ fn trajectory_derivatives_are_consistent() {
         for t in [0.3, 1.7, 4.2, 6.9] {
             let (a, b) = (s.reference(t - h), s.reference(t + h));
             let c = s.reference(t);
-            assert!(((b.p_m - a.p_m) / (2.0 * h) - c.v_m_s).norm() < 1e-6, "{name} v");
-            assert!(((b.v_m_s - a.v_m_s) / (2.0 * h) - c.a_m_s2).norm() < 1e-5, "{name} a");
-            assert!(((b.a_m_s2 - a.a_m_s2) / (2.0 * h) - c.j_m_s3).norm() < 1e-4, "{name} j");
+            assert!(
+                ((b.p_m - a.p_m) / (2.0 * h) - c.v_m_s).norm() < 1e-6,
+                "{name} v"
+            );
+            assert!(
+                ((b.v_m_s - a.v_m_s) / (2.0 * h) - c.a_m_s2).norm() < 1e-5,
+                "{name} a"
+            );
+            assert!(
+                ((b.a_m_s2 - a.a_m_s2) / (2.0 * h) - c.j_m_s3).norm() < 1e-4,
+                "{name} j"
+            );
         }
     }
 }
 
 #[test]
 fn bad_scenario_errors_name_file_and_key() {
-    let bad_key = "duration_s = 5.0\nwindd = 3\n[trajectory]\nkind = \"hover\"\nposition_m = [0,0,1]\n";
-    let e = format!("{:#}", Scenario::from_toml_str(bad_key, "bad.toml", "bad").unwrap_err());
+    let bad_key =
+        "duration_s = 5.0\nwindd = 3\n[trajectory]\nkind = \"hover\"\nposition_m = [0,0,1]\n";
+    let e = format!(
+        "{:#}",
+        Scenario::from_toml_str(bad_key, "bad.toml", "bad").unwrap_err()
+    );
     assert!(e.contains("bad.toml") && e.contains("windd"), "{e}");
 
     let bad_type = "duration_s = \"long\"\n[trajectory]\nkind = \"hover\"\nposition_m = [0,0,1]\n";
-    let e = format!("{:#}", Scenario::from_toml_str(bad_type, "t.toml", "t").unwrap_err());
+    let e = format!(
+        "{:#}",
+        Scenario::from_toml_str(bad_type, "t.toml", "t").unwrap_err()
+    );
     assert!(e.contains("t.toml") && e.contains("duration_s"), "{e}");
 
     let bad_kind = "duration_s = 5.0\n[trajectory]\nkind = \"loop\"\n";
-    let e = format!("{:#}", Scenario::from_toml_str(bad_kind, "k.toml", "k").unwrap_err());
+    let e = format!(
+        "{:#}",
+        Scenario::from_toml_str(bad_kind, "k.toml", "k").unwrap_err()
+    );
     assert!(e.contains("k.toml") && e.contains("loop"), "{e}");
 
     let bad_field = "duration_s = 5.0\n[trajectory]\nkind = \"circle\"\ncenter_m = [0,0,1]\nradius_m = 0.5\nperiod = 3\n";
-    let e = format!("{:#}", Scenario::from_toml_str(bad_field, "c.toml", "c").unwrap_err());
+    let e = format!(
+        "{:#}",
+        Scenario::from_toml_str(bad_field, "c.toml", "c").unwrap_err()
+    );
     assert!(e.contains("c.toml") && e.contains("period"), "{e}");
 
     let bad_value = "duration_s = 5.0\n[trajectory]\nkind = \"hover\"\nposition_m = [0,0,1]\n[disturbance]\nrotor_efficiency = [0.8, 1, 1, 7]\n";
-    let e = format!("{:#}", Scenario::from_toml_str(bad_value, "v.toml", "v").unwrap_err());
-    assert!(e.contains("v.toml") && e.contains("rotor_efficiency"), "{e}");
+    let e = format!(
+        "{:#}",
+        Scenario::from_toml_str(bad_value, "v.toml", "v").unwrap_err()
+    );
+    assert!(
+        e.contains("v.toml") && e.contains("rotor_efficiency"),
+        "{e}"
+    );
 
     let e = format!("{:#}", Scenario::load("/nonexistent/x.toml").unwrap_err());
     assert!(e.contains("/nonexistent/x.toml"), "{e}");
@@ -131,5 +157,8 @@ fn bad_scenario_errors_name_file_and_key() {
 fn unknown_controller_is_an_error() {
     let s = scenario("hover");
     let e = by_name("nope", &s).err().unwrap().to_string();
-    assert!(e.contains("nope") && e.contains("pid") && e.contains("geometric"), "{e}");
+    assert!(
+        e.contains("nope") && e.contains("pid") && e.contains("geometric"),
+        "{e}"
+    );
 }

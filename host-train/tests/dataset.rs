@@ -71,8 +71,7 @@ fn collected_data_has_the_documented_shape_and_resimulates() {
                     rotor_efficiency: r.meta.rotor_efficiency,
                     ..Disturbance::default()
                 };
-                let mut plant =
-                    Plant::new(params.clone(), dist, Effects::default(), win.states[0]);
+                let mut plant = Plant::new(params.clone(), dist, Effects::default(), win.states[0]);
                 plant.set_t_s(win.t_s[0]);
                 for i in 1..5 {
                     for _ in 0..10 {
@@ -104,7 +103,10 @@ fn collection_is_deterministic_for_a_seed() {
     collect(&a, &cfg).unwrap();
     collect(&b, &cfg).unwrap();
     for f in ["manifest.json", "realization_00.csv"] {
-        assert_eq!(std::fs::read(a.join(f)).unwrap(), std::fs::read(b.join(f)).unwrap());
+        assert_eq!(
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap()
+        );
     }
     let c = tmpdir("det-c");
     collect(&c, &CollectConfig { seed: 4, ..cfg }).unwrap();
@@ -133,7 +135,10 @@ fn loader_errors_name_file_and_line() {
     lines[3] = lines[3].replacen(",", ",x", 3);
     std::fs::write(&f, lines.join("\n")).unwrap();
     let e = format!("{:#}", load(&dir).unwrap_err());
-    assert!(e.contains("realization_00.csv") && e.contains("line 4"), "{e}");
+    assert!(
+        e.contains("realization_00.csv") && e.contains("line 4"),
+        "{e}"
+    );
     std::fs::remove_file(dir.join("manifest.json")).unwrap();
     let e = format!("{:#}", load(&dir).unwrap_err());
     assert!(e.contains("manifest.json"), "{e}");

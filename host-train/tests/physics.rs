@@ -1,8 +1,6 @@
 //! Physics checks of the SITL plant against closed forms.
 
-use host_train::plant::{
-    rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams,
-};
+use host_train::plant::{rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams};
 use nalgebra::{Matrix3, Vector3};
 
 const DT: f64 = 1e-3;
@@ -46,7 +44,12 @@ fn torque_free(inertia: [f64; 3]) {
         v_body_m_s: Vector3::new(0.1, 0.2, -0.3),
         w_body_rad_s: Vector3::new(3.0, -2.0, 5.0),
     };
-    let mut plant = Plant::new(params.clone(), Disturbance::default(), Effects::default(), s0);
+    let mut plant = Plant::new(
+        params.clone(),
+        Disturbance::default(),
+        Effects::default(),
+        s0,
+    );
     let l0 = s0.angular_momentum_world(&params);
     let e0 = s0.kinetic_energy(&params);
     for _ in 0..10_000 {
@@ -101,7 +104,12 @@ fn rotor_efficiency_scales_thrust_and_torque() {
         ..Disturbance::default()
     };
     let params = VehicleParams::cf2x();
-    let plant = Plant::new(params.clone(), dist, Effects::default(), PlantState::default());
+    let plant = Plant::new(
+        params.clone(),
+        dist,
+        Effects::default(),
+        PlantState::default(),
+    );
     let nominal = Plant::nominal(PlantState::default());
     let rpm = [15000.0, 14000.0, 13000.0, 12000.0];
     let s = PlantState::default();
@@ -135,12 +143,18 @@ fn wind_produces_m_w_force() {
     let windy = Plant::new(params.clone(), dist.clone(), Effects::default(), s);
     let calm = Plant::nominal(s);
     let rpm = [14000.0; 4];
-    let df = s.rot * (windy.forces(0.0, &s, &rpm).force_body_n - calm.forces(0.0, &s, &rpm).force_body_n);
+    let df = s.rot
+        * (windy.forces(0.0, &s, &rpm).force_body_n - calm.forces(0.0, &s, &rpm).force_body_n);
     assert!((df - params.mass_kg * w).norm() < 1e-15);
 
     // Closed form in flight: at hover thrust, level, the wind accelerates the body by w.
     let p0 = Vector3::new(0.0, 0.0, 1.0);
-    let mut plant = Plant::new(params.clone(), dist, Effects::default(), PlantState::at_rest(p0, 0.0));
+    let mut plant = Plant::new(
+        params.clone(),
+        dist,
+        Effects::default(),
+        PlantState::at_rest(p0, 0.0),
+    );
     let h = params.hover_rpm();
     for _ in 0..1000 {
         plant.step([h; 4], DT);

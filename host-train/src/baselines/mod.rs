@@ -13,7 +13,10 @@ pub use pid::{DslPid, DslPidGains};
 
 /// Names accepted by [`by_name`], with a one-line description each.
 pub const CONTROLLERS: &[(&str, &str)] = &[
-    ("pid", "DSL PID of gym-pybullet-drones (the paper's data-collection controller)"),
+    (
+        "pid",
+        "DSL PID of gym-pybullet-drones (the paper's data-collection controller)",
+    ),
     (
         "geometric",
         "Lee-Leok-McClamroch SE(3) controller on the true constants, no adaptation",
@@ -28,7 +31,10 @@ pub fn by_name(name: &str, scenario: &Scenario) -> Result<Box<dyn Controller>> {
         "geometric" => Ok(Box::new(Geometric::new(scenario.vehicle.clone()))),
         _ => {
             let names: Vec<&str> = CONTROLLERS.iter().map(|(n, _)| *n).collect();
-            bail!("unknown controller `{name}`: expected one of {}", names.join(", "))
+            bail!(
+                "unknown controller `{name}`: expected one of {}",
+                names.join(", ")
+            )
         }
     }
 }

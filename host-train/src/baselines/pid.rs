@@ -112,13 +112,7 @@ impl Controller for DslPid {
         self.integral_rpy_e = Vector3::zeros();
     }
 
-    fn step(
-        &mut self,
-        _t_s: f64,
-        s: &PlantState,
-        r: &TrajectoryPoint,
-        dt: f64,
-    ) -> [f64; 4] {
+    fn step(&mut self, _t_s: f64, s: &PlantState, r: &TrajectoryPoint, dt: f64) -> [f64; 4] {
         let g = &self.gains;
         let rot = s.rot;
         // Position loop.
