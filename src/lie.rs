@@ -84,7 +84,7 @@ pub fn log(r: &Matrix3<f32>) -> Vector3<f32> {
         Vector3::new(sym(r.m13, r.m31) / az, sym(r.m23, r.m32) / az, az)
     };
     let n = axis.norm();
-    if !(n > 0.0) || !n.is_finite() {
+    if !n.is_finite() || n <= 0.0 {
         return Vector3::zeros();
     }
     let mut axis = axis / n;
@@ -106,13 +106,13 @@ pub fn orthonormalize(r: &Matrix3<f32>) -> Option<Matrix3<f32>> {
     let c0 = r.column(0).into_owned();
     let c1 = r.column(1).into_owned();
     let n0 = c0.norm();
-    if !(n0 > 1e-6) || !n0.is_finite() {
+    if !n0.is_finite() || n0 <= 1e-6 {
         return None;
     }
     let x = c0 / n0;
     let y = c1 - x * x.dot(&c1);
     let n1 = y.norm();
-    if !(n1 > 1e-6) || !n1.is_finite() {
+    if !n1.is_finite() || n1 <= 1e-6 {
         return None;
     }
     let y = y / n1;
