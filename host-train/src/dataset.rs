@@ -42,7 +42,16 @@
 //! The control is constant through a window: the state at `step = k+1` is the plant's response
 //! to the state at `step = k` under that command for `1/sample_hz` s (physics at
 //! `sample_hz × 10` Hz by default). Numbers are printed in Rust's shortest round-trip form, so
-//! they parse back to the same f64. Load with pandas: `pd.read_csv(f)` then
+//! they parse back to the same f64.
+//!
+//! Collection (defaults = paper Sec. 4): for each realization j the wind's x and y components are
+//! drawn from ±`--wind-levels` (z = 0) and δ₁, δ₂ ~ U[0.94, 0.98] (δ₃ = δ₄ = 1); then for each of
+//! the 9 desired poses (x, y ∈ U[−1, 1] m, z ∈ U[0.5, 1.5] m, yaw ∈ U[−0.5, 0.5] rad) the vehicle
+//! starts at a random state near it (position ± 0.5 m, roll/pitch ± 0.2 rad, velocity ± 0.3 m/s,
+//! rates ± 0.5 rad/s) and the DSL PID flies to it. The PID is called once per window at the
+//! window's first state and its command is held for the window's N − 1 intervals (so it runs at
+//! 240/4 = 60 Hz); consecutive windows of a pose are contiguous (the last state of one window is
+//! the first of the next). Each realization has its own RNG stream of `--seed`. Load with pandas: `pd.read_csv(f)` then
 //! `df.groupby("window")`, or numpy: `np.loadtxt(f, delimiter=",", skiprows=1).reshape(-1, N, 29)`.
 
 use std::fmt::Write as _;
