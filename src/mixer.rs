@@ -124,9 +124,9 @@ impl Airframe {
         let d4 = 4.0 * self.arm_xy_m;
         let k4 = 4.0 * self.km_nm_per_rpm2 / self.kf_n_per_rpm2;
         let t_max = self.max_rotor_thrust_n();
-        if !(u.thrust_n.is_finite() && u.torque_nm.iter().all(|v| v.is_finite()))
-            || !(d4 > 0.0 && k4 > 0.0 && t_max > 0.0)
-        {
+        let finite = u.thrust_n.is_finite() && u.torque_nm.iter().all(|v| v.is_finite());
+        let valid_airframe = d4 > 0.0 && k4 > 0.0 && t_max > 0.0;
+        if !(finite && valid_airframe) {
             return (RotorCommand::OFF, sat);
         }
         let tx = u.torque_nm.x / d4;

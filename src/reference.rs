@@ -77,7 +77,7 @@ pub fn desired_attitude(
     let e3 = Vector3::z();
     let n = f_w.norm();
     let cos_max = libm::cosf(max_tilt_rad);
-    let (b3, b3_dot, tilt_limited) = if !(n > 1e-6) || !n.is_finite() || f_w.z <= 0.0 {
+    let (b3, b3_dot, tilt_limited) = if !n.is_finite() || n <= 1e-6 || f_w.z <= 0.0 {
         (e3, Vector3::zeros(), true)
     } else {
         let b3 = f_w / n;

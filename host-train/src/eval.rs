@@ -30,7 +30,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::baselines;
 use crate::controller::Controller;
 use crate::scenario::Scenario;
 
@@ -258,10 +257,13 @@ pub struct EvalArgs {
     /// Scenario TOML file to fly (see scenarios/*.toml for the keys).
     #[arg(long, value_name = "FILE")]
     pub scenario: PathBuf,
-    /// Controller to fly: `pid` or `geometric` (default: the scenario's `controller` key, else
-    /// `geometric`).
+    /// Controller to fly: pid, geometric, ida-pbc, geometric-adaptive, learned or adaptive
+    /// (default: the scenario's `controller` key, else `geometric`).
     #[arg(long, value_name = "NAME")]
     pub controller: Option<String>,
+    /// Weight blob of the learned model, for `learned` and `adaptive`.
+    #[arg(long, value_name = "FILE", default_value = crate::flight::DEFAULT_WEIGHTS)]
+    pub weights: PathBuf,
     /// Output directory for report.json, path.svg and error.svg (created if missing).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -275,7 +277,7 @@ pub fn run(args: &EvalArgs) -> Result<Report> {
         .clone()
         .or_else(|| scenario.spec.controller.clone())
         .unwrap_or_else(|| "geometric".into());
-    let mut ctrl = baselines::by_name(&name, &scenario)?;
+    let mut ctrl = crate::flight::by_name(&name, &scenario, Some(&args.weights))?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory `{}`", args.out.display()))?;
     let pb = indicatif::ProgressBar::new(scenario.spec.duration_s.ceil() as u64);

@@ -21,13 +21,22 @@ pub const DEFAULT_WEIGHTS: &str = "weights/default.hfw";
 
 /// Names of the core controllers, with a one-line description each.
 pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
-    ("adaptive", "learned Hamiltonian model + adaptation law (the paper's controller)"),
-    ("learned", "learned Hamiltonian model, adaptation off (the paper's \"without adaptation\")"),
+    (
+        "adaptive",
+        "learned Hamiltonian model + adaptation law (the paper's controller)",
+    ),
+    (
+        "learned",
+        "learned Hamiltonian model, adaptation off (the paper's \"without adaptation\")",
+    ),
     (
         "geometric-adaptive",
         "nominal model + adaptation on a constant world force and body torque",
     ),
-    ("ida-pbc", "the energy-based law on the nominal model, no adaptation"),
+    (
+        "ida-pbc",
+        "the energy-based law on the nominal model, no adaptation",
+    ),
 ];
 
 /// A host controller that is the core's: it also gives the core's full [`Output`].
@@ -60,19 +69,30 @@ pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreSt
         ..Gains::default()
     };
     Ok(match name {
-        "adaptive" => Box::new(CoreController::new(name, load_learned(weights)?, Gains::default())),
+        "adaptive" => Box::new(CoreController::new(
+            name,
+            load_learned(weights)?,
+            Gains::default(),
+        )),
         "learned" => Box::new(CoreController::new(name, load_learned(weights)?, no_adapt)),
         "geometric-adaptive" => Box::new(geometric_adaptive()),
         "ida-pbc" => Box::new(ida_pbc()),
         _ => {
             let names: Vec<&str> = CORE_CONTROLLERS.iter().map(|(n, _)| *n).collect();
-            bail!("unknown core controller `{name}`: expected one of {}", names.join(", "))
+            bail!(
+                "unknown core controller `{name}`: expected one of {}",
+                names.join(", ")
+            )
         }
     })
 }
 
 /// Any controller by name: the core's ([`CORE_CONTROLLERS`]) or a baseline (`pid`, `geometric`).
-pub fn by_name(name: &str, scenario: &Scenario, weights: Option<&Path>) -> Result<Box<dyn Controller>> {
+pub fn by_name(
+    name: &str,
+    scenario: &Scenario,
+    weights: Option<&Path>,
+) -> Result<Box<dyn Controller>> {
     if CORE_CONTROLLERS.iter().any(|(n, _)| *n == name) {
         let c = core_by_name(name, weights)?;
         let c: Box<dyn Controller> = c;
@@ -137,16 +157,23 @@ impl<M: HamiltonianModel> Controller for CoreController<M> {
     }
 
     fn adaptation_estimate(&self) -> Option<Vec<f64>> {
-        self.inner
-            .gains
-            .adapt
-            .then(|| self.inner.estimate().iter().map(|v| f64::from(*v)).collect())
+        self.inner.gains.adapt.then(|| {
+            self.inner
+                .estimate()
+                .iter()
+                .map(|v| f64::from(*v))
+                .collect()
+        })
     }
 }
 
 /// The classic adaptive baseline: nominal model, hand-chosen features, adaptation on.
 pub fn geometric_adaptive() -> CoreController<NominalModel> {
-    CoreController::new("geometric-adaptive", NominalModel::default(), Gains::default())
+    CoreController::new(
+        "geometric-adaptive",
+        NominalModel::default(),
+        Gains::default(),
+    )
 }
 
 /// The energy-based law on the nominal model without adaptation.

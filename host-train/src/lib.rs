@@ -9,13 +9,17 @@
 //! - [`scenario`]: TOML scenario files;
 //! - [`dataset`]: `collect` (paper Sec. 4) and the dataset format with its loader;
 //! - [`eval`]: closed-loop flights, `report.json`;
-//! - [`plot`]: SVG figures.
+//! - [`plot`]: SVG figures;
+//! - [`flight`]: the core's controller behind the host interface, and the full registry;
+//! - [`bridge`]: the JSON-lines bridge for external simulators.
 #![warn(missing_docs)]
 
 pub mod baselines;
+pub mod bridge;
 pub mod controller;
 pub mod dataset;
 pub mod eval;
+pub mod flight;
 pub mod plant;
 pub mod plot;
 pub mod scenario;

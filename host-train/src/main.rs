@@ -19,6 +19,10 @@ enum Command {
     Collect(host_train::dataset::CollectArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),
+    /// Drive a core controller from an external simulator: one JSON request per line on stdin
+    /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
+    /// thrust, torques, a, faults). See the README for the protocol.
+    Bridge(host_train::bridge::BridgeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -48,6 +52,7 @@ fn run(cli: Cli) -> Result<()> {
             let r = host_train::eval::run(&args)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
+        Command::Bridge(args) => host_train::bridge::run(&args)?,
     }
     Ok(())
 }
