@@ -11,13 +11,15 @@
 //! - [`eval`]: closed-loop flights, `report.json`;
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
-//! - [`bridge`]: the JSON-lines bridge for external simulators.
+//! - [`bridge`]: the JSON-lines bridge for external simulators;
+//! - [`demo`]: collect, train, fly every controller on paper-spiral, report.
 #![warn(missing_docs)]
 
 pub mod baselines;
 pub mod bridge;
 pub mod controller;
 pub mod dataset;
+pub mod demo;
 pub mod eval;
 pub mod flight;
 pub mod plant;

@@ -17,12 +17,19 @@ enum Command {
     /// Collect training data as in the paper's Sec. 4: the DSL PID flies to random poses under
     /// M disturbance realizations; writes DIR/manifest.json and DIR/realization_NN.csv.
     Collect(host_train::dataset::CollectArgs),
+    /// Learn the Hamiltonian model and disturbance features (paper Problem 1) from a dataset;
+    /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
+    Train(host_train::train::TrainArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),
     /// Drive a core controller from an external simulator: one JSON request per line on stdin
     /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
     /// thrust, torques, a, faults). See the README for the protocol.
     Bridge(host_train::bridge::BridgeArgs),
+    /// The whole project in one command: collect a dataset, train the Hamiltonian model, fly
+    /// paper-spiral with pid, geometric, geometric-adaptive, learned and adaptive; writes
+    /// DIR/report.json and SVG figures, prints a table.
+    Demo(host_train::demo::DemoArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -48,11 +55,28 @@ fn run(cli: Cli) -> Result<()> {
                 t0.elapsed().as_secs_f64()
             );
         }
+        Command::Train(args) => {
+            host_train::train::run_cli(&args)?;
+        }
         Command::Eval(args) => {
             let r = host_train::eval::run(&args)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Bridge(args) => host_train::bridge::run(&args)?,
+        Command::Demo(args) => {
+            let t0 = std::time::Instant::now();
+            let r = host_train::demo::run(&args)?;
+            println!("\n{} — {}\n", r.scenario, r.weights);
+            println!("{}", host_train::demo::table(&r.controllers));
+            if let Some(best) = &r.best {
+                println!("best by RMSE over t ≥ 5 s: {best}");
+            }
+            println!(
+                "report and figures in {} ({:.0} s)",
+                args.out.display(),
+                t0.elapsed().as_secs_f64()
+            );
+        }
     }
     Ok(())
 }

@@ -182,3 +182,116 @@ pub fn error_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
     }
     write_atomic(path, buf.as_bytes())
 }
+
+/// Position error against time on a logarithmic axis (cm), so that millimetre and decimetre
+/// errors read on one figure.
+pub fn error_log_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (900, 450)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let t_max = logs
+            .iter()
+            .map(|(_, l)| l.planned_duration_s)
+            .fold(0.1, f64::max);
+        let cm = |e: f64| (e * 100.0).max(1e-4);
+        let e_max = logs
+            .iter()
+            .flat_map(|(_, l)| l.err_m.iter())
+            .filter(|e| e.is_finite())
+            .fold(0.01, |a: f64, &b| a.max(cm(b)))
+            * 1.5;
+        let e_min = logs
+            .iter()
+            .flat_map(|(_, l)| l.err_m.iter())
+            .filter(|e| e.is_finite())
+            .fold(e_max, |a: f64, &b| a.min(cm(b)))
+            .max(1e-3);
+        let title = logs
+            .first()
+            .map(|(_, l)| format!("{}: position error (log scale)", l.scenario))
+            .unwrap_or_default();
+        let mut ch = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_max, (e_min..e_max).log_scale())
+            .map_err(pe)?;
+        ch.configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("|p - p*| (cm)")
+            .draw()
+            .map_err(pe)?;
+        for (i, (name, l)) in logs.iter().enumerate() {
+            let c = PALETTE[i % PALETTE.len()];
+            ch.draw_series(LineSeries::new(
+                l.t_s
+                    .iter()
+                    .zip(&l.err_m)
+                    .filter(|(_, e)| e.is_finite())
+                    .map(|(t, e)| (*t, cm(*e))),
+                c,
+            ))
+            .map_err(pe)?
+            .label(name.to_string())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(pe)?;
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
+
+/// The adaptation estimate a(t) of one flight, one line per component (the paper's Fig. 2
+/// companion: how fast the disturbance weights settle).
+pub fn adaptation_svg(label: &str, log: &FlightLog, path: &Path) -> Result<()> {
+    let p = log.adaptation.iter().map(Vec::len).max().unwrap_or(0);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (900, 450)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let (lo, hi) = bounds(log.adaptation.iter().flatten().copied());
+        let t_max = log.planned_duration_s.max(0.1);
+        let mut ch = ChartBuilder::on(&root)
+            .caption(
+                format!("{}: adaptation estimate a(t), {label}", log.scenario),
+                ("sans-serif", 20),
+            )
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_max, lo..hi)
+            .map_err(pe)?;
+        ch.configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("a_k")
+            .draw()
+            .map_err(pe)?;
+        for k in 0..p {
+            let c = PALETTE[k % PALETTE.len()];
+            ch.draw_series(LineSeries::new(
+                log.t_s
+                    .iter()
+                    .zip(&log.adaptation)
+                    .filter_map(|(t, a)| a.get(k).map(|v| (*t, *v))),
+                c,
+            ))
+            .map_err(pe)?
+            .label(format!("a{k}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+        ch.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(pe)?;
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
