@@ -4,7 +4,8 @@
 //!   bootloader) or, with the `qemu` feature, the same map with flash at 0x08000000.
 //! - Weights: `HAMFLIGHT_WEIGHTS` (a path, relative to `firmware/` or absolute) or by default
 //!   `../weights/default.hfw`. If the default file does not exist yet, a checked blob of
-//!   `ModelWeights::default()` is written to OUT_DIR and embedded instead, with a warning.
+//!   `ModelWeights::default()` is written to OUT_DIR and embedded instead, with a warning, and
+//!   `cfg(hamflight_untrained)` makes the firmware fly the nominal model (still checking the blob).
 //!   The chosen path reaches the code as `env!("HAMFLIGHT_BLOB_PATH")`.
 
 use std::env;
@@ -39,6 +40,8 @@ fn main() {
 
     // Weight blob.
     println!("cargo:rerun-if-env-changed=HAMFLIGHT_WEIGHTS");
+    println!("cargo::rustc-check-cfg=cfg(hamflight_untrained)");
+    let mut untrained = false;
     let blob_path = match env::var_os("HAMFLIGHT_WEIGHTS") {
         Some(p) => {
             let p = PathBuf::from(p);
@@ -62,14 +65,20 @@ fn main() {
                 p
             } else {
                 println!(
-                    "cargo:warning=no trained weights at {}; embedding ModelWeights::default()",
+                    "cargo:warning=no trained weights at {}; embedding ModelWeights::default() \
+                     and flying the nominal model",
                     p.display()
                 );
+                untrained = true;
                 write_default_blob(&out)
             }
         }
     };
     println!("cargo:rerun-if-changed={}", blob_path.display());
+    if untrained {
+        // No trained networks: the all-zero ones have g = 0 and cannot fly.
+        println!("cargo:rustc-cfg=hamflight_untrained");
+    }
     println!(
         "cargo:rustc-env=HAMFLIGHT_BLOB_PATH={}",
         blob_path.display()

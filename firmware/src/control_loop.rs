@@ -7,7 +7,7 @@
 //! [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate is
 //! kept).
 
-use crate::link::{Input, LinkStatus, Report, Telemetry};
+use crate::link::{Input, LinkStatus, ModelKind, Report, Telemetry};
 use crate::motor::{rpm_to_pwm, Motors};
 use embedded_hal::pwm::SetDutyCycle;
 use hamflight::blob::BlobError;
@@ -27,16 +27,35 @@ pub const WATCHDOG_MS: u32 = 50;
 /// [`WATCHDOG_MS`] in control ticks (rounded up).
 pub const WATCHDOG_TICKS: u32 = (WATCHDOG_MS * LOOP_HZ).div_ceil(1000);
 
-/// The model the firmware flies.
-///
-/// Interim: the nominal model, with the blob decoded and checked at boot all the same (a bad
-/// blob keeps the motors off); becomes `LearnedModel` when it lands in the core.
+/// The model the firmware flies: the learned model of the embedded blob.
+#[cfg(not(hamflight_untrained))]
+pub type Model = hamflight::model::LearnedModel;
+/// The model the firmware flies: built without trained weights (`build.rs` found no
+/// `weights/default.hfw`), the nominal model; the embedded placeholder blob is still checked.
+#[cfg(hamflight_untrained)]
 pub type Model = hamflight::model::NominalModel;
+
+/// Which model this build flies (reported in [`crate::link::Hello`]).
+pub const MODEL_KIND: ModelKind = if cfg!(hamflight_untrained) {
+    ModelKind::Nominal
+} else {
+    ModelKind::Learned
+};
 
 /// Decodes and checks the weight blob and builds the model.
 ///
 /// # Errors
 /// The blob's first failed check ([`BlobError`]).
+#[cfg(not(hamflight_untrained))]
+pub fn load_model(blob: &[u8]) -> Result<Model, BlobError> {
+    Model::from_blob(blob)
+}
+
+/// Decodes and checks the weight blob and builds the model.
+///
+/// # Errors
+/// The blob's first failed check ([`BlobError`]).
+#[cfg(hamflight_untrained)]
 pub fn load_model(blob: &[u8]) -> Result<Model, BlobError> {
     hamflight::blob::decode(blob).map(|_| Model::default())
 }

@@ -184,6 +184,15 @@ pub enum CostUnit {
     QemuSysTick168MHz,
 }
 
+/// Which model the firmware flies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ModelKind {
+    /// The learned model of the embedded weight blob.
+    Learned,
+    /// The nominal model (a build without trained weights).
+    Nominal,
+}
+
 /// Sent at boot and on [`Uplink::Hello`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hello {
@@ -193,6 +202,10 @@ pub struct Hello {
     pub blob_ok: bool,
     /// Length of the embedded blob (bytes).
     pub blob_len: u32,
+    /// CRC-32 of the whole embedded blob, to check that a host uses the same one.
+    pub blob_crc: u32,
+    /// The model flown.
+    pub model: ModelKind,
     /// Unit of the step cost.
     pub cost_unit: CostUnit,
     /// Watchdog timeout (control ticks without a fresh state).

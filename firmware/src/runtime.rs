@@ -158,6 +158,7 @@ static HELLO_REQ: AtomicBool = AtomicBool::new(false);
 static FINISH_REQ: AtomicBool = AtomicBool::new(false);
 static FINISHED: AtomicBool = AtomicBool::new(false);
 static BLOB_OK: AtomicBool = AtomicBool::new(false);
+static BLOB_CRC: AtomicU32 = AtomicU32::new(0);
 static STEPS: AtomicU32 = AtomicU32::new(0);
 static REPORT: Mutex<Cell<Option<Report>>> = Mutex::new(Cell::new(None));
 
@@ -178,6 +179,8 @@ fn hello() -> Downlink {
         loop_hz: LOOP_HZ,
         blob_ok: BLOB_OK.load(Ordering::Relaxed),
         blob_len: crate::WEIGHT_BLOB.len() as u32,
+        blob_crc: BLOB_CRC.load(Ordering::Relaxed),
+        model: crate::control_loop::MODEL_KIND,
         cost_unit: COST_UNIT,
         watchdog_ticks: WATCHDOG_TICKS,
     })
@@ -205,6 +208,10 @@ pub fn init(
     let model = load_model(crate::WEIGHT_BLOB);
     let blob = model.as_ref().map(|_| ()).map_err(|e| *e);
     BLOB_OK.store(blob.is_ok(), Ordering::Relaxed);
+    BLOB_CRC.store(
+        hamflight::blob::crc32(crate::WEIGHT_BLOB),
+        Ordering::Relaxed,
+    );
 
     // Cost counters: both are started; the build reads the one that works where it runs.
     core.DCB.enable_trace();

@@ -16,7 +16,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use hamflight::model::NominalModel;
+use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
 use hamflight::{FlightController, Gains};
 use host_train::controller::{Controller, TrajectoryPoint};
 use host_train::eval::{fly, Report};
@@ -28,25 +28,38 @@ use host_train::scenario::Scenario;
 #[path = "../../firmware/src/link.rs"]
 mod link;
 
-use link::{CostUnit, Downlink, FrameDecoder, Hello, Input, Uplink, WireSetpoint, WireState};
+use link::{
+    CostUnit, Downlink, FrameDecoder, Hello, Input, ModelKind, Uplink, WireSetpoint, WireState,
+};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The model the firmware flies (firmware/src/control_loop.rs `load_model`), built on the host.
-fn native_model() -> NominalModel {
-    NominalModel::default()
+/// The blob the firmware embeds (firmware/build.rs: `HAMFLIGHT_WEIGHTS` relative to firmware/,
+/// else weights/default.hfw).
+fn weights_path() -> PathBuf {
+    match std::env::var_os("HAMFLIGHT_WEIGHTS") {
+        Some(p) => {
+            let p = PathBuf::from(p);
+            if p.is_absolute() {
+                p
+            } else {
+                repo().join("firmware").join(p)
+            }
+        }
+        None => repo().join("weights/default.hfw"),
+    }
 }
 
 /// The same controller on the host: the core compiled for x86-64, stepped exactly as the
 /// firmware's control loop steps it (dt = 1 / loop rate as f32).
-struct NativeController {
-    inner: FlightController<NominalModel>,
+struct NativeController<M> {
+    inner: FlightController<M>,
     dt_s: f32,
 }
 
-impl Controller for NativeController {
+impl<M: HamiltonianModel> Controller for NativeController<M> {
     fn name(&self) -> &str {
         "native"
     }
@@ -378,11 +391,35 @@ fn paper_spiral_on_qemu_matches_native() {
         qemu.output()
     );
 
-    let mut native = NativeController {
-        inner: FlightController::new(native_model(), Gains::default()),
-        dt_s: 1.0 / hello.loop_hz as f32,
+    // The model the firmware flies (firmware/src/control_loop.rs `load_model`), on the host.
+    let dt_s = 1.0 / hello.loop_hz as f32;
+    let log_host = match hello.model {
+        ModelKind::Nominal => {
+            let mut native = NativeController {
+                inner: FlightController::new(NominalModel::default(), Gains::default()),
+                dt_s,
+            };
+            fly(&scenario, &mut native)
+        }
+        ModelKind::Learned => {
+            let wp = weights_path();
+            let blob =
+                std::fs::read(&wp).unwrap_or_else(|e| panic!("cannot read {}: {e}", wp.display()));
+            assert_eq!(
+                hamflight::blob::crc32(&blob),
+                hello.blob_crc,
+                "the firmware embeds another blob than {}",
+                wp.display()
+            );
+            let model =
+                LearnedModel::from_blob(&blob).unwrap_or_else(|e| panic!("{}: {e}", wp.display()));
+            let mut native = NativeController {
+                inner: FlightController::new(model, Gains::default()),
+                dt_s,
+            };
+            fly(&scenario, &mut native)
+        }
     };
-    let log_host = fly(&scenario, &mut native);
 
     let r_fw = Report::from_log(&log_fw, Some(&path));
     let r_host = Report::from_log(&log_host, Some(&path));
@@ -402,9 +439,10 @@ fn paper_spiral_on_qemu_matches_native() {
     let mean = insns.iter().sum::<f64>() / insns.len().max(1) as f64;
     let max = insns.iter().copied().fold(0.0, f64::max);
     println!(
-        "PIL paper-spiral {:.1} s: {} steps, max |p_qemu - p_host| = {:.3e} m, \
+        "PIL paper-spiral {:.1} s, {:?} model: {} steps, max |p_qemu - p_host| = {:.3e} m, \
          RMSE(t>=5 s) qemu {:.4} m / host {:.4} m, whole {:.4} / {:.4} m",
         scenario.spec.duration_s,
+        hello.model,
         fw.costs.len(),
         max_dev,
         r_fw.rmse_pos_window_m.unwrap_or(f64::NAN),
