@@ -2,7 +2,7 @@
 //! motors off and a fault flag for non-finite input, and the mixer's limits.
 
 use hamflight::mixer::Airframe;
-use hamflight::model::NominalModel;
+use hamflight::model::{LearnedModel, ModelWeights, NominalModel};
 use hamflight::{FlightController, Gains, RotorCommand, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
 use proptest::prelude::*;
@@ -55,6 +55,18 @@ proptest! {
             prop_assert!(out.rotors.thrust_n.iter().all(|t| *t >= 0.0 && *t <= max_t * (1.0 + 1e-6)));
             prop_assert!(out.a.iter().all(|x| x.is_finite()));
             prop_assert!(out.a.norm() <= fc.gains.rates.a_max * (1.0 + 1e-5));
+        }
+    }
+
+    #[test]
+    fn learned_model_output_is_finite(s in state(), sp in setpoint()) {
+        let model = LearnedModel::new(ModelWeights::prior());
+        let mut fc = FlightController::new(model, Gains::default());
+        for _ in 0..5 {
+            let out = fc.step(&s, &sp, 0.002);
+            prop_assert!(!out.faults.is_fault());
+            prop_assert!(out.rotors.thrust_n.iter().chain(out.rotors.rpm.iter()).all(|x| x.is_finite()));
+            prop_assert!(out.a.iter().all(|x| x.is_finite()));
         }
     }
 }
