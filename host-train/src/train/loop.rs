@@ -68,7 +68,15 @@ pub fn init_weights(seed: u64, out_gain: f32) -> ModelWeights {
 }
 
 /// The loss of a batch: Σₙ (ℓ_p + ℓ_R + ℓ_ζ) per window, and its mean over the batch.
-pub fn batch_loss(model: &TModel, c: &Consts, a_all: Tensor<2>, b: &Batch, dt_s: f32) -> Tensor<1> {
+/// `vel_weight` weighs ‖v − v̄‖² inside ℓ_ζ ([`TrainConfig::vel_weight`]).
+pub fn batch_loss(
+    model: &TModel,
+    c: &Consts,
+    a_all: Tensor<2>,
+    b: &Batch,
+    dt_s: f32,
+    vel_weight: f32,
+) -> Tensor<1> {
     let s0 = &b.states[0];
     let forcing = Forcing::new(c, b.u.clone(), a_all, b.realization.clone());
     let mut x = model.to_phase(c, s0.p.clone(), s0.rot.clone(), s0.v.clone(), s0.w.clone());
@@ -78,8 +86,11 @@ pub fn batch_loss(model: &TModel, c: &Consts, a_all: Tensor<2>, b: &Batch, dt_s:
         let (v, w) = model.velocities(c, &x);
         let lp = (x.p.clone() - target.p.clone()).square().sum_dim(1);
         let lr = rotation_loss(x.rot.clone(), target.rot.clone());
-        let lz =
-            (v - target.v.clone()).square().sum_dim(1) + (w - target.w.clone()).square().sum_dim(1);
+        let lz = (v - target.v.clone())
+            .square()
+            .sum_dim(1)
+            .mul_scalar(vel_weight)
+            + (w - target.w.clone()).square().sum_dim(1);
         let l = lp + lr + lz;
         total = Some(match total {
             Some(t) => t + l,
@@ -99,15 +110,16 @@ pub fn eval_loss(
     data: &Windows,
     ids: &[usize],
     dt_s: f32,
-    device: &Device,
+    vel_weight: f32,
 ) -> f64 {
+    let device = &a_all.device();
     if ids.is_empty() {
         return f64::NAN;
     }
     let mut sum = 0.0;
     for chunk in ids.chunks(2048) {
         let b = data::batch(data, chunk, device);
-        let l = batch_loss(model, c, a_all.clone(), &b, dt_s);
+        let l = batch_loss(model, c, a_all.clone(), &b, dt_s, vel_weight);
         sum += f64::from(to_vec(&l)[0]) * chunk.len() as f64;
     }
     sum / ids.len() as f64
@@ -175,7 +187,7 @@ pub fn train(
             data,
             heldout,
             dt_s,
-            &device,
+            cfg.vel_weight,
         )
     };
     let initial_val_loss = val(&params);
@@ -208,7 +220,14 @@ pub fn train(
                 .map(|p| p.clone().autodiff().require_grad())
                 .collect();
             let model = TModel::from_tensors(&leaves[..n_net]);
-            let loss = batch_loss(&model, &c_ad, leaves[n_net].clone(), &b, dt_s);
+            let loss = batch_loss(
+                &model,
+                &c_ad,
+                leaves[n_net].clone(),
+                &b,
+                dt_s,
+                cfg.vel_weight,
+            );
             let grads = loss.backward();
             let g: Vec<Tensor<2>> = leaves
                 .iter()

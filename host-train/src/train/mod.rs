@@ -37,6 +37,11 @@ pub struct TrainConfig {
     pub heldout_frac: f64,
     /// Fraction of the remaining training windows used (default 1; for data-efficiency runs).
     pub data_frac: f64,
+    /// Weight of the linear-velocity term of ℓ_ζ (default 50). The paper's ℓ is any distance on
+    /// TSE(3); over a 17 ms window a unit of normalized force error moves v about 7× less than
+    /// a unit of normalized torque error moves ω, so the plain sum (weight 1) all but ignores
+    /// the forces — where the wind lives. 50 ≈ 7² balances them.
+    pub vel_weight: f32,
     /// Scale of the output layers' initial weights around the physical prior (default 0.05).
     pub init_out_gain: f32,
     /// Hidden width; fixed at compile time by the core ([`HIDDEN`]), checked here.
@@ -55,6 +60,7 @@ impl Default for TrainConfig {
             seed: 0,
             heldout_frac: 0.1,
             data_frac: 1.0,
+            vel_weight: 50.0,
             init_out_gain: 0.05,
             hidden: HIDDEN,
             features: FEATURES,
@@ -97,4 +103,98 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
     let report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
     export::write(out, &trained.weights, &report)?;
     Ok(report)
+}
+
+/// `host-train train`: the command-line face of [`run`].
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrainArgs {
+    /// Dataset directory written by `host-train collect`.
+    #[arg(long, value_name = "DIR")]
+    pub data: std::path::PathBuf,
+    /// Output weight blob; the report goes to FILE.json next to it.
+    #[arg(long, value_name = "FILE.hfw", default_value = "weights/default.hfw")]
+    pub out: std::path::PathBuf,
+    /// Epochs.
+    #[arg(long, default_value_t = TrainConfig::default().epochs)]
+    pub epochs: usize,
+    /// Adam's initial learning rate (cosine-decayed to 1/20).
+    #[arg(long, default_value_t = TrainConfig::default().lr)]
+    pub lr: f64,
+    /// Minibatch size (windows).
+    #[arg(long, default_value_t = TrainConfig::default().batch)]
+    pub batch: usize,
+    /// Seed (initialization, split, minibatch order).
+    #[arg(long, default_value_t = TrainConfig::default().seed)]
+    pub seed: u64,
+    /// Hidden width: must equal the core's compile-time HIDDEN (the firmware's fixed networks).
+    #[arg(long, default_value_t = HIDDEN)]
+    pub hidden: usize,
+    /// Disturbance features p: must equal the core's compile-time FEATURES.
+    #[arg(long, default_value_t = FEATURES)]
+    pub features: usize,
+    /// Fraction of each realization's windows held out for validation.
+    #[arg(long, default_value_t = TrainConfig::default().heldout_frac)]
+    pub heldout: f64,
+    /// Fraction of the training windows used (data-efficiency runs).
+    #[arg(long, default_value_t = TrainConfig::default().data_frac)]
+    pub data_frac: f64,
+    /// Weight of ‖v − v̄‖² in ℓ_ζ.
+    #[arg(long, default_value_t = TrainConfig::default().vel_weight)]
+    pub vel_weight: f32,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl TrainArgs {
+    /// The configuration these arguments describe.
+    pub fn config(&self) -> TrainConfig {
+        TrainConfig {
+            epochs: self.epochs,
+            lr: self.lr,
+            batch: self.batch,
+            seed: self.seed,
+            hidden: self.hidden,
+            features: self.features,
+            heldout_frac: self.heldout,
+            data_frac: self.data_frac,
+            vel_weight: self.vel_weight,
+            ..TrainConfig::default()
+        }
+    }
+}
+
+/// Runs `host-train train` and prints a summary.
+///
+/// # Errors
+/// As [`run`].
+pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
+    let r = run(&args.config(), &args.data, &args.out, args.quiet)?;
+    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
+    println!(
+        "trained {} epochs on {} windows in {:.0} s: held-out loss {:.3e} -> {:.3e}",
+        r.curve.len(),
+        r.train_windows,
+        r.train_time_s,
+        r.initial_val_loss,
+        r.final_val_loss
+    );
+    println!(
+        "held-out {}-step error (pos m / rot rad / vel m/s / rate rad/s): learned {:.2e} / {:.2e} / {:.2e} / {:.2e}, nominal {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+        r.heldout_learned.pos_m.len(),
+        last(&r.heldout_learned.pos_m),
+        last(&r.heldout_learned.rot_rad),
+        last(&r.heldout_learned.vel_m_s),
+        last(&r.heldout_learned.rate_rad_s),
+        last(&r.heldout_nominal.pos_m),
+        last(&r.heldout_nominal.rot_rad),
+        last(&r.heldout_nominal.vel_m_s),
+        last(&r.heldout_nominal.rate_rad_s),
+    );
+    println!(
+        "wrote {} and {}.json",
+        args.out.display(),
+        args.out.display()
+    );
+    Ok(r)
 }
