@@ -18,6 +18,7 @@ use crate::link::{
 };
 use crate::motor::Motors;
 use core::cell::{Cell, RefCell, UnsafeCell};
+use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use critical_section::Mutex;
 use embedded_hal_nb::serial::{Read, Write};
@@ -99,21 +100,24 @@ struct Tick {
 
 /// State owned by one interrupt handler, reached by reference (never moved: the loop holds the
 /// model, kilobytes that must not be copied every tick). An atomic flag makes a second,
-/// overlapping borrow fail instead of aliasing.
+/// overlapping borrow fail instead of aliasing. Empty, it is all zeros, so it lives in `.bss`
+/// (an `Option<T>` static would put a 10 KiB initial image of `None` into flash).
 pub struct IsrCell<T> {
-    value: UnsafeCell<Option<T>>,
+    value: UnsafeCell<MaybeUninit<T>>,
+    full: AtomicBool,
     busy: AtomicBool,
 }
 
-// SAFETY: access to `value` is exclusive through the `busy` flag (`with`); T moves between
-// contexts, hence `T: Send`.
+// SAFETY: access to `value` is exclusive through the `busy` flag (`with`, `set`); T moves
+// between contexts, hence `T: Send`.
 unsafe impl<T: Send> Sync for IsrCell<T> {}
 
 impl<T> IsrCell<T> {
     /// An empty cell.
     pub const fn new() -> Self {
         Self {
-            value: UnsafeCell::new(None),
+            value: UnsafeCell::new(MaybeUninit::uninit()),
+            full: AtomicBool::new(false),
             busy: AtomicBool::new(false),
         }
     }
@@ -123,21 +127,30 @@ impl<T> IsrCell<T> {
         if self.busy.swap(true, Ordering::Acquire) {
             return None;
         }
-        // SAFETY: `busy` was false and is now true: no other reference exists until we reset it.
-        let r = unsafe { (*self.value.get()).as_mut() }.map(f);
+        let r = if self.full.load(Ordering::Acquire) {
+            // SAFETY: `busy` gives exclusive access, and `full` says the value is initialised.
+            Some(f(unsafe { (*self.value.get()).assume_init_mut() }))
+        } else {
+            None
+        };
         self.busy.store(false, Ordering::Release);
         r
     }
 
-    /// Fills (or empties) the cell; false if it is borrowed.
-    pub fn set(&self, v: Option<T>) -> bool {
+    /// Fills an empty cell with `make()`, built in place where the compiler can; false (and
+    /// `make` not called) if the cell is full or borrowed.
+    pub fn init_with(&self, make: impl FnOnce() -> T) -> bool {
         if self.busy.swap(true, Ordering::Acquire) {
             return false;
         }
-        // SAFETY: as in `with`.
-        unsafe { *self.value.get() = v };
+        let ok = !self.full.load(Ordering::Acquire);
+        if ok {
+            // SAFETY: exclusive through `busy`; the slot is empty, so nothing is overwritten.
+            unsafe { (*self.value.get()).write(make()) };
+            self.full.store(true, Ordering::Release);
+        }
         self.busy.store(false, Ordering::Release);
-        true
+        ok
     }
 }
 
@@ -238,13 +251,13 @@ pub fn init(
     timer.dier().write(|w| w.uie().set_bit());
 
     rx.listen();
-    RX.set(Some((rx, FrameDecoder::new())));
-    TICK.set(Some(Tick {
+    RX.init_with(|| (rx, FrameDecoder::new()));
+    TICK.init_with(|| Tick {
         control: ControlLoop::new(model),
         motors,
         counter: Counter {},
         timer,
-    }));
+    });
     queue(&hello());
     // SAFETY: the handlers' state is in place; priorities are set before unmasking.
     unsafe {
