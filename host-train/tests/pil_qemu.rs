@@ -462,13 +462,15 @@ fn paper_spiral_on_qemu_matches_native() {
         report.watchdog_trips
     );
 
+    // The firmware is the native controller: same path (to the tick of a crash, if any), same
+    // tracking, clean link.
     assert_eq!(
         log_fw.p_m.len(),
         log_host.p_m.len(),
-        "flights of different length"
+        "flights of different length (firmware crash {:?} s, native {:?} s)",
+        r_fw.crash_time_s,
+        r_host.crash_time_s
     );
-    assert!(!r_host.crashed, "the native controller crashed: {r_host:?}");
-    assert!(!r_fw.crashed, "the QEMU firmware crashed: {r_fw:?}");
     assert!(
         max_dev <= 1e-3,
         "flown path differs from the native run by {max_dev:.3e} m (> 1 mm)"
@@ -482,4 +484,19 @@ fn paper_spiral_on_qemu_matches_native() {
     assert_eq!(report.bad_frames, 0, "the firmware dropped frames");
     assert_eq!(fw.port.bad_frames, 0, "the host dropped frames");
     assert_eq!(report.steps as usize, fw.costs.len());
+    // And it must actually fly the whole flight.
+    assert!(
+        !r_host.crashed,
+        "the controller crashes paper-spiral at t = {:?} s even natively on the host (the firmware \
+         matched it within {max_dev:.1e} m): the {:?} model ({}) cannot fly it, a model problem, \
+         not a firmware one",
+        r_host.crash_time_s,
+        hello.model,
+        if hello.model == ModelKind::Learned {
+            weights_path().display().to_string()
+        } else {
+            "nominal".to_string()
+        }
+    );
+    assert!(!r_fw.crashed, "the QEMU firmware crashed: {r_fw:?}");
 }
