@@ -103,7 +103,7 @@ fn core_and_host_models_agree() {
 
     // J⁻¹, g, W.
     let jinv_h = to_vec(&host.inertia_inv(&c, &rot).jinv);
-    let w_h = to_vec(&host.features(&rot, v.clone(), om.clone()));
+    let w_h = to_vec(&host.features(&rot));
     let mut jinv_c = Vec::new();
     let mut w_c = Vec::new();
     for s in &states {

@@ -11,7 +11,7 @@
 //! - **g head**: inputs the rows of R; output o (6×4 row-major) gives
 //!   g_ik = o_ik · [`WRENCH_SCALE`]ᵢ / [`CONTROL_SCALE`]ₖ, so that every output is dimensionless
 //!   and of order one (the true g has o = identity pattern).
-//! - **W head**: inputs `[r₁, r₂, r₃, v / V_SCALE, ω / W_SCALE]`; output o (6×p) holds, per
+//! - **W head**: inputs the rows of R (see [`super::DIST_IN`] for why not 𝔭); output o (6×p) holds, per
 //!   feature k, a world-frame specific force n_k = o[0..3][k] (m/s² per unit of aₖ) and a body
 //!   torque t_k = o[3..6][k] (units of [`TORQUE_SCALE_NM`]). The feature column is
 //!   W[:, k] = [m Rᵀ n_k; TORQUE_SCALE_NM · t_k]: wind, a world-fixed force, is then linear in a
@@ -49,10 +49,6 @@ pub const CONTROL_SCALE: [f32; 4] = [
     TORQUE_SCALE_NM,
     TORQUE_SCALE_NM,
 ];
-/// Body-velocity normalization (m/s) of the W head's inputs.
-pub const V_SCALE_M_S: f32 = 1.0;
-/// Body-rate normalization (rad/s) of the W head's inputs.
-pub const W_SCALE_RAD_S: f32 = 10.0;
 
 /// The learned Hamiltonian model: the networks θ (J⁻¹, g) and φ (W) of a weight blob.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -173,14 +169,10 @@ pub fn rot_input(rot: &Matrix3<f32>) -> [f32; 9] {
     ]
 }
 
-/// The W head's input `[r₁, r₂, r₃, v / V_SCALE, ω / W_SCALE]` (body-frame velocities).
+/// The W head's input: the rows of R (the same as the J⁻¹ and g heads').
+#[inline]
 pub fn disturbance_input(state: &State) -> [f32; super::DIST_IN] {
-    let r = rot_input(&state.rot);
-    let v = state.v_body_m_s / V_SCALE_M_S;
-    let w = state.w_body_rad_s / W_SCALE_RAD_S;
-    [
-        r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], v.x, v.y, v.z, w.x, w.y, w.z,
-    ]
+    rot_input(&state.rot)
 }
 
 /// The lower-triangular L from the head's outputs `[l₁₁, l₂₁, l₂₂, l₃₁, l₃₂, l₃₃]`.
@@ -267,6 +259,68 @@ pub fn l_for_diagonal_inertia(inertia_kg_m2: &Vector3<f32>) -> [f32; JINV_OUT] {
         0.0,
         d(inertia_kg_m2.z),
     ]
+}
+
+/// The normalized feature output o(hover) (6×p, rows world force x, y, z then body torque
+/// x, y, z) at R = I, v = ω = 0.
+fn hover_feature_output(net: &DisturbanceNet) -> SMatrix<f32, 6, FEATURES> {
+    let hover = State::default();
+    SMatrix::<f32, 6, FEATURES>::from_row_slice(&net.forward(&disturbance_input(&hover)))
+}
+
+/// The basis change T that makes the features equal the nominal ones at hover: o(hover) T = I,
+/// i.e. T = o(hover)⁻¹; `None` if o(hover) is singular or ill-conditioned.
+///
+/// Adapting a' in W' = W T is the paper's adaptation law with the constant gain matrix
+/// Γ = T Tᵀ on a (ȧ = Γ Wᵀ s): the same Lyapunov argument holds for any Γ ≻ 0. It matters
+/// because the learned columns mix force and torque at very different scales; in the nominal
+/// basis each rate (c_p, c_v on force rows, c_R, c_ω on torque rows) acts on its own block.
+pub fn hover_feature_basis(net: &DisturbanceNet) -> Option<SMatrix<f32, FEATURES, FEATURES>> {
+    let o = hover_feature_output(net);
+    let sv = o.singular_values();
+    let (lo, hi) = sv
+        .iter()
+        .fold((f32::MAX, 0.0f32), |(lo, hi), s| (lo.min(*s), hi.max(*s)));
+    if !(lo.is_finite() && hi.is_finite()) || lo <= 1e-3 * hi {
+        return None;
+    }
+    o.try_inverse()
+}
+
+impl ModelWeights {
+    /// The same model with the feature basis changed by `t` (W' = W T), folded into the W head's
+    /// output layer so inference costs nothing more. Weights a for `self` become T⁻¹ a.
+    pub fn with_feature_basis(&self, t: &SMatrix<f32, FEATURES, FEATURES>) -> Self {
+        let mut out = *self;
+        let l2 = &self.disturbance.l2;
+        let new = &mut out.disturbance.l2;
+        // Output row (i, j) of o' = o T is Σ_k T[k, j] · row (i, k).
+        for i in 0..6 {
+            for j in 0..FEATURES {
+                let Some(dst) = new.weight.get_mut(i * FEATURES + j) else {
+                    continue;
+                };
+                let mut b = 0.0;
+                dst.iter_mut().for_each(|v| *v = 0.0);
+                for k in 0..FEATURES {
+                    let c = t[(k, j)];
+                    if let (Some(src), Some(bias)) = (
+                        l2.weight.get(i * FEATURES + k),
+                        l2.bias.get(i * FEATURES + k),
+                    ) {
+                        dst.iter_mut()
+                            .zip(src.iter())
+                            .for_each(|(d, s)| *d += c * s);
+                        b += c * bias;
+                    }
+                }
+                if let Some(v) = new.bias.get_mut(i * FEATURES + j) {
+                    *v = b;
+                }
+            }
+        }
+        out
+    }
 }
 
 const _: () = assert!(GAIN_IN == 9 && JINV_OUT == 6 && GAIN_OUT == 24);
@@ -409,5 +463,23 @@ mod tests {
         let ortho = (s.rot.transpose() * s.rot - Matrix3::identity()).norm();
         assert!(ortho < 1e-4, "RᵀR − I = {ortho}");
         assert!((s.rot.determinant() - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn feature_basis_folds_into_the_output_layer_and_gives_nominal_features_at_hover() {
+        let w = random_weights(7, 0.5);
+        let t = hover_feature_basis(&w.disturbance).expect("well-conditioned");
+        let changed = LearnedModel::new(w.with_feature_basis(&t));
+        let original = LearnedModel::new(w);
+        // At hover the new features are the nominal ones.
+        let hover = State::default();
+        let nominal = NominalModel::default().terms(&hover).features;
+        let err = (changed.features(&hover) - nominal).norm() / nominal.norm();
+        assert!(err < 1e-4, "W'(hover) vs nominal: {err}");
+        // Everywhere W' = W T (the model's span is unchanged).
+        let s = tilted_state();
+        let expect = original.features(&s) * t;
+        let err = (changed.features(&s) - expect).norm() / expect.norm();
+        assert!(err < 1e-4, "W' vs W T: {err}");
     }
 }

@@ -158,6 +158,9 @@ impl Adam {
     }
 }
 
+/// Index in [`TModel::tensors`] of the W head's input-layer weight (J⁻¹ and g heads take 6 each).
+const FEATURE_INPUT_WEIGHT: usize = 12;
+
 /// Trains on `train` windows, validating on `heldout` after every epoch.
 pub fn train(
     cfg: &TrainConfig,
@@ -237,6 +240,10 @@ pub fn train(
             let lv = f64::from(to_vec(&loss.inner())[0]);
             if lv.is_finite() {
                 adam.step(&mut params, &g, &lrs);
+                if cfg.feature_decay > 0.0 {
+                    let p = &mut params[FEATURE_INPUT_WEIGHT];
+                    *p = p.clone().mul_scalar(1.0 - lr * cfg.feature_decay);
+                }
                 sum += lv * chunk.len() as f64;
                 count += chunk.len();
             }

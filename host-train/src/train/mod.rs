@@ -42,6 +42,12 @@ pub struct TrainConfig {
     /// a unit of normalized torque error moves ω, so the plain sum (weight 1) all but ignores
     /// the forces — where the wind lives. 50 ≈ 7² balances them.
     pub vel_weight: f32,
+    /// Decoupled weight decay λ on the W head's input layer (default 1; 0 turns it off): after
+    /// each Adam step those weights shrink by lr·λ. Without it the features learn to vary
+    /// steeply with attitude — under each realization's wind the vehicle hovers at its own tilt,
+    /// so tilt can stand in for a_j — and the adaptation law then chases the features
+    /// (paper-spiral: 0.49 cm with λ = 0; see issue 5's note).
+    pub feature_decay: f64,
     /// Scale of the output layers' initial weights around the physical prior (default 0.05).
     pub init_out_gain: f32,
     /// Hidden width; fixed at compile time by the core ([`HIDDEN`]), checked here.
@@ -61,6 +67,7 @@ impl Default for TrainConfig {
             heldout_frac: 0.1,
             data_frac: 1.0,
             vel_weight: 50.0,
+            feature_decay: 1.0,
             init_out_gain: 0.05,
             hidden: HIDDEN,
             features: FEATURES,
@@ -99,7 +106,8 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
         }
         train_ids = kept;
     }
-    let trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
+    let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
+    to_hover_feature_basis(&mut trained);
     let report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
     export::write(out, &trained.weights, &report)?;
     Ok(report)
@@ -141,6 +149,9 @@ pub struct TrainArgs {
     /// Weight of ‖v − v̄‖² in ℓ_ζ.
     #[arg(long, default_value_t = TrainConfig::default().vel_weight)]
     pub vel_weight: f32,
+    /// Decoupled weight decay on the feature network's input layer (0 = off).
+    #[arg(long, default_value_t = TrainConfig::default().feature_decay)]
+    pub feature_decay: f64,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -159,6 +170,7 @@ impl TrainArgs {
             heldout_frac: self.heldout,
             data_frac: self.data_frac,
             vel_weight: self.vel_weight,
+            feature_decay: self.feature_decay,
             ..TrainConfig::default()
         }
     }
@@ -197,4 +209,25 @@ pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
         args.out.display()
     );
     Ok(r)
+}
+
+/// Changes the trained features to the basis in which they equal the nominal ones at hover
+/// ([`hamflight::model::learned::hover_feature_basis`]): W' = W T, a_j' = T⁻¹ a_j. The model's
+/// predictions W a_j are unchanged; the adaptation law's rates then act on force and torque
+/// separately. Left as is (with a warning) if W at hover is ill-conditioned.
+pub fn to_hover_feature_basis(trained: &mut r#loop::Trained) {
+    use hamflight::model::learned::hover_feature_basis;
+    let Some(t) = hover_feature_basis(&trained.weights.disturbance) else {
+        eprintln!("warning: W at hover is ill-conditioned; features left in the trained basis");
+        return;
+    };
+    let Some(t_inv) = t.try_inverse() else {
+        eprintln!("warning: feature basis not invertible; features left in the trained basis");
+        return;
+    };
+    trained.weights = trained.weights.with_feature_basis(&t);
+    for a in trained.a.iter_mut() {
+        let v = t_inv * nalgebra::SVector::<f32, FEATURES>::from(*a);
+        *a = v.into();
+    }
 }

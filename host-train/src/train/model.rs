@@ -9,8 +9,7 @@
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::learned::{
-    CONTROL_SCALE, INERTIA_INV_EPS, INERTIA_INV_SCALE_PER_KG_M2, TORQUE_SCALE_NM, V_SCALE_M_S,
-    WRENCH_SCALE, W_SCALE_RAD_S,
+    CONTROL_SCALE, INERTIA_INV_EPS, INERTIA_INV_SCALE_PER_KG_M2, TORQUE_SCALE_NM, WRENCH_SCALE,
 };
 use hamflight::model::{GRAVITY_M_S2, MASS_KG};
 use hamflight::nn::{Dense, Mlp};
@@ -370,24 +369,16 @@ impl TModel {
     }
 
     /// The feature head's raw output [B, 6, p].
-    pub fn feature_output(&self, rot: &Tensor<3>, v: Tensor<2>, w: Tensor<2>) -> Tensor<3> {
-        let b = v.dims()[0];
-        let x = Tensor::cat(
-            vec![
-                rot.clone().reshape([b, 9]),
-                v.div_scalar(V_SCALE_M_S),
-                w.div_scalar(W_SCALE_RAD_S),
-            ],
-            1,
-        );
-        let y = self.disturbance.forward(x).y;
+    pub fn feature_output(&self, rot: &Tensor<3>) -> Tensor<3> {
+        let b = rot.dims()[0];
+        let y = self.disturbance.forward(rot.clone().reshape([b, 9])).y;
         let p = y.dims()[1] / 6;
         y.reshape([b, 6, p])
     }
 
-    /// W(q, ζ) [B,6,p] (force rows m Rᵀ n_k, torque rows TORQUE_SCALE_NM t_k).
-    pub fn features(&self, rot: &Tensor<3>, v: Tensor<2>, w: Tensor<2>) -> Tensor<3> {
-        let o = self.feature_output(rot, v, w);
+    /// W(q) [B,6,p] (force rows m Rᵀ n_k, torque rows TORQUE_SCALE_NM t_k).
+    pub fn features(&self, rot: &Tensor<3>) -> Tensor<3> {
+        let o = self.feature_output(rot);
         let [b, _, p] = o.dims();
         let force = rot
             .clone()
@@ -400,14 +391,8 @@ impl TModel {
     }
 
     /// d = W a as a body force and torque ([B,3] each).
-    pub fn disturbance(
-        &self,
-        rot: &Tensor<3>,
-        v: Tensor<2>,
-        w: Tensor<2>,
-        a: Tensor<2>,
-    ) -> (Tensor<2>, Tensor<2>) {
-        let o = self.feature_output(rot, v, w);
+    pub fn disturbance(&self, rot: &Tensor<3>, a: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let o = self.feature_output(rot);
         let [b, _, p] = o.dims();
         let oa = o.matmul(a.reshape([b, p, 1])).reshape([b, 6]);
         let n_world = oa.clone().narrow(1, 0, 3);
@@ -422,7 +407,7 @@ impl TModel {
         let w = matvec(ev.jinv.clone(), x.pw.clone());
         let v = x.pv.clone().div_scalar(MASS_KG);
         let (fu, tu) = self.control_wrench(c, &x.rot, f.u_norm.clone());
-        let (fd, td) = self.disturbance(&x.rot, v.clone(), w.clone(), f.a.clone());
+        let (fd, td) = self.disturbance(&x.rot, f.a.clone());
         let b = v.dims()[0];
         // Rᵀ (m g e₃) = m g r₃.
         let r3 = x.rot.clone().narrow(1, 2, 1).reshape([b, 3]);
