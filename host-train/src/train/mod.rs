@@ -5,8 +5,10 @@
 //! - [`data`]: the dataset's windows as tensors, the held-out split;
 //! - [`model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex + autodiff);
 //! - [`r#loop`]: Adam, the epoch loop, the progress bar;
+//! - [`blackbox`]: issue 4's black-box MLP baseline and the data-efficiency comparison;
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
 
+pub mod blackbox;
 pub mod data;
 pub mod export;
 #[path = "loop.rs"]
