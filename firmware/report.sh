@@ -36,7 +36,7 @@ blob_path=$(grep -ao 'HAMFLIGHT_BLOB_PATH=[^ ]*' target/thumbv7em-none-eabihf/re
 blob_len=$( [ -n "$blob_path" ] && stat -c %s "$blob_path" || echo "?")
 
 echo "running the step benchmark under QEMU (-icount shift=0) ..." >&2
-line=$(timeout 300 qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial null \
+line=$(timeout 120 qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial null \
   -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf_qemu" | grep '^BENCH' || true)
 [ -n "$line" ] || { echo "the QEMU benchmark printed no BENCH line" >&2; exit 1; }
 get() { sed -n "s/.* $1=\([0-9]*\).*/\1/p" <<<"$line"; }

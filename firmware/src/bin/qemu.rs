@@ -68,7 +68,12 @@ fn main() -> ! {
         ),
     }
     #[cfg(feature = "bench")]
-    bench::run(&mut tx);
+    if boot.blob.is_err() {
+        // No step would ever run.
+        fail("BENCH impossible: the weight blob was rejected");
+    } else {
+        bench::run(&mut tx);
+    }
     #[cfg(not(feature = "bench"))]
     loop {
         if runtime::pump(&mut tx) {
