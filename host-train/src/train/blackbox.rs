@@ -13,6 +13,7 @@
 
 use super::data::{self, Batch, Windows, WINDOW_LEN};
 use super::model::{rotation_loss, to_vec, TMlp};
+use super::r#loop::Adam;
 use super::TrainConfig;
 use anyhow::Result;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -69,25 +70,6 @@ pub struct Row {
     pub blackbox_orth_err_max: f64,
     /// Black-box parameter count.
     pub blackbox_params: usize,
-}
-
-/// The training windows kept at `data_frac`: an even share of each realization's (the same
-/// selection as [`super::run`]).
-pub fn subset(windows: &Windows, train_ids: &[usize], data_frac: f64) -> Vec<usize> {
-    if data_frac >= 1.0 {
-        return train_ids.to_vec();
-    }
-    let mut kept = Vec::new();
-    for j in 0..windows.realizations.len() {
-        let ids: Vec<usize> = train_ids
-            .iter()
-            .copied()
-            .filter(|&i| windows.windows[i].realization == j)
-            .collect();
-        let n = ((ids.len() as f64) * data_frac).ceil() as usize;
-        kept.extend_from_slice(&ids[..n.min(ids.len())]);
-    }
-    kept
 }
 
 /// Per-component mean and standard deviation of the finite-difference state derivatives of the
@@ -251,38 +233,6 @@ impl BlackBox {
     }
 }
 
-/// Adam (β₁ = 0.9, β₂ = 0.999, ε = 1e-8), as in [`super::r#loop`].
-struct Adam {
-    m: Vec<Tensor<2>>,
-    v: Vec<Tensor<2>>,
-    t: i32,
-}
-
-impl Adam {
-    fn new(params: &[Tensor<2>]) -> Self {
-        Self {
-            m: params.iter().map(|p| p.zeros_like()).collect(),
-            v: params.iter().map(|p| p.zeros_like()).collect(),
-            t: 0,
-        }
-    }
-
-    fn step(&mut self, params: &mut [Tensor<2>], grads: &[Tensor<2>], lr: f64) {
-        self.t += 1;
-        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8f64);
-        let c1 = 1.0 - b1.powi(self.t);
-        let c2 = 1.0 - b2.powi(self.t);
-        for i in 0..params.len() {
-            let g = grads[i].clone();
-            self.m[i] = self.m[i].clone().mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
-            self.v[i] = self.v[i].clone().mul_scalar(b2) + g.square().mul_scalar(1.0 - b2);
-            let mhat = self.m[i].clone().div_scalar(c1);
-            let vhat = self.v[i].clone().div_scalar(c2);
-            params[i] = params[i].clone() - (mhat / vhat.sqrt().add_scalar(eps)).mul_scalar(lr);
-        }
-    }
-}
-
 /// Xavier-uniform layers `[in, out]` (output layer scaled by `out_gain`), zero biases.
 fn init(seed: u64, dims: [usize; 4], out_gain: f32, device: &Device) -> Vec<Tensor<2>> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -370,7 +320,7 @@ pub fn train_blackbox(
                 .map(|(l, p)| l.grad(&grads).unwrap_or_else(|| p.zeros_like()))
                 .collect();
             if f64::from(to_vec(&loss.inner())[0]).is_finite() {
-                adam.step(&mut params, &g, lr);
+                adam.step(&mut params, &g, &vec![lr; g.len()]);
             }
         }
     }
@@ -467,7 +417,7 @@ pub fn compare(data_dir: &Path, fractions: &[f64], epochs: usize) -> Result<Vec<
     let out_dir: PathBuf = std::env::temp_dir().join("hamflight-blackbox-compare");
     let mut rows = Vec::with_capacity(fractions.len());
     for &frac in fractions {
-        let ids = subset(&windows, &train_ids, frac);
+        let ids = data::subset(&windows, &train_ids, frac);
         let bb = train_blackbox(&cfg, &windows, &ids, &heldout);
         eprintln!(
             "frac {frac}: black box ({} params) trained on {} windows in {:.0} s, held-out loss {:.3e}",

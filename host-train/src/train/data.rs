@@ -252,3 +252,22 @@ pub fn batch(data: &Windows, ids: &[usize], device: &Device) -> Batch {
         len: b,
     }
 }
+
+/// The training windows kept at `data_frac` (data-efficiency runs): the first share of each
+/// realization's (already shuffled) windows.
+pub fn subset(windows: &Windows, train_ids: &[usize], data_frac: f64) -> Vec<usize> {
+    if data_frac >= 1.0 {
+        return train_ids.to_vec();
+    }
+    let mut kept = Vec::new();
+    for j in 0..windows.realizations.len() {
+        let ids: Vec<usize> = train_ids
+            .iter()
+            .copied()
+            .filter(|&i| windows.windows[i].realization == j)
+            .collect();
+        let n = ((ids.len() as f64) * data_frac).ceil() as usize;
+        kept.extend_from_slice(&ids[..n.min(ids.len())]);
+    }
+    kept
+}

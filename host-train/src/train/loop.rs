@@ -125,14 +125,16 @@ pub fn eval_loss(
     sum / ids.len() as f64
 }
 
-struct Adam {
+/// Adam (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) on a list of tensors, a learning rate per tensor.
+pub struct Adam {
     m: Vec<Tensor<2>>,
     v: Vec<Tensor<2>>,
     t: i32,
 }
 
 impl Adam {
-    fn new(params: &[Tensor<2>]) -> Self {
+    /// Zero moments for `params`.
+    pub fn new(params: &[Tensor<2>]) -> Self {
         Self {
             m: params.iter().map(|p| p.zeros_like()).collect(),
             v: params.iter().map(|p| p.zeros_like()).collect(),
@@ -141,7 +143,7 @@ impl Adam {
     }
 
     /// One Adam step (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) with a learning rate per tensor.
-    fn step(&mut self, params: &mut [Tensor<2>], grads: &[Tensor<2>], lrs: &[f64]) {
+    pub fn step(&mut self, params: &mut [Tensor<2>], grads: &[Tensor<2>], lrs: &[f64]) {
         self.t += 1;
         let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8f64);
         let c1 = 1.0 - b1.powi(self.t);

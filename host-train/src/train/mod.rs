@@ -92,22 +92,8 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
         );
     }
     let windows = data::load(data_dir)?;
-    let (mut train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
-    if cfg.data_frac < 1.0 {
-        let keep = ((train_ids.len() as f64) * cfg.data_frac).ceil().max(1.0) as usize;
-        // The split is already shuffled per realization; take an even share of each.
-        let mut kept = Vec::with_capacity(keep);
-        for j in 0..windows.realizations.len() {
-            let ids: Vec<usize> = train_ids
-                .iter()
-                .copied()
-                .filter(|&i| windows.windows[i].realization == j)
-                .collect();
-            let n = ((ids.len() as f64) * cfg.data_frac).ceil() as usize;
-            kept.extend_from_slice(&ids[..n.min(ids.len())]);
-        }
-        train_ids = kept;
-    }
+    let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
+    let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
     let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
     to_hover_feature_basis(&mut trained);
     let report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
