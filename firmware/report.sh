@@ -17,8 +17,9 @@ feat_bench="bench${extra:+,$extra}"
 echo "building (release) ..." >&2
 cargo build --release --bin crazyflie ${feat_board:+--features "$feat_board"} >&2
 cargo build --release --bin qemu --features "$feat_bench" >&2
-elf_board=target/thumbv7em-none-eabihf/release/crazyflie
-elf_qemu=target/thumbv7em-none-eabihf/release/qemu
+tdir="${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release"
+elf_board="$tdir/crazyflie"
+elf_qemu="$tdir/qemu"
 
 if command -v arm-none-eabi-size >/dev/null; then
   size_tool=arm-none-eabi-size
@@ -32,8 +33,6 @@ command -v qemu-system-arm >/dev/null || { echo "need qemu-system-arm (apt-get i
 sec() { "$size_tool" -A "$elf_board" | awk -v s="$1" '$1==s {print $2; f=1} END {if(!f) print 0}'; }
 flash=$(( $(sec .vector_table) + $(sec .text) + $(sec .rodata) + $(sec .data) ))
 sram=$(( $(sec .data) + $(sec .bss) + $(sec .uninit) ))
-blob_path=$(grep -ao 'HAMFLIGHT_BLOB_PATH=[^ ]*' target/thumbv7em-none-eabihf/release/build/hamflight-firmware-*/output 2>/dev/null | tail -n1 | cut -d= -f2 || true)
-blob_len=$( [ -n "$blob_path" ] && stat -c %s "$blob_path" || echo "?")
 
 echo "running the step benchmark under QEMU (-icount shift=0) ..." >&2
 line=$(timeout 120 qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial null \
@@ -41,7 +40,7 @@ line=$(timeout 120 qemu-system-arm -M netduinoplus2 -nographic -monitor none -se
 [ -n "$line" ] || { echo "the QEMU benchmark printed no BENCH line" >&2; exit 1; }
 get() { sed -n "s/.* $1=\([0-9]*\).*/\1/p" <<<"$line"; }
 steps=$(get steps); total=$(get total); max=$(get max); min=$(get min)
-peak=$(get stack_peak); boot=$(get stack_boot_peak); ssize=$(get stack_size)
+peak=$(get stack_peak); boot=$(get stack_boot_peak); ssize=$(get stack_size); blob_len=$(get blob_len)
 
 # SysTick runs on the 168 MHz core clock of QEMU's netduinoplus2; with -icount shift=0 one
 # instruction takes 1 ns of virtual time, so instructions = ticks * 1000 / 168.

@@ -136,14 +136,15 @@ mod bench {
         while !runtime::pump(tx) {}
         match runtime::report() {
             Some(r) => hprintln!(
-                "BENCH steps={} total={} max={} min={} stack_peak={} stack_boot_peak={} stack_size={} unit=systick168",
+                "BENCH steps={} total={} max={} min={} stack_peak={} stack_boot_peak={} stack_size={} blob_len={} unit=systick168",
                 r.steps,
                 r.total_step_cost,
                 r.max_step_cost,
                 r.min_step_cost,
                 r.stack_peak_bytes,
                 r.stack_boot_peak_bytes,
-                r.stack_size_bytes
+                r.stack_size_bytes,
+                hamflight_firmware::WEIGHT_BLOB.len()
             ),
             None => hprintln!("BENCH no report"),
         }
