@@ -18,7 +18,7 @@
 use crate::adapt::{Adaptation, AdaptationRates, TrackingError};
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
-use crate::reference::{desired_attitude, Setpoint};
+use crate::reference::{desired_attitude, Setpoint, TiltLimit};
 use nalgebra::{Matrix4, SVector, Vector3, Vector4};
 
 /// Controller gains and adaptation rates.
@@ -147,6 +147,8 @@ pub struct FlightController<M> {
     /// Rotor geometry for the mixer.
     pub airframe: Airframe,
     adaptation: Adaptation,
+    /// `gains.max_tilt_rad` with its cosine and sine, refreshed when the gain changes.
+    tilt: TiltLimit,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
@@ -157,6 +159,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             gains,
             airframe: Airframe::default(),
             adaptation: Adaptation::default(),
+            tilt: TiltLimit::new(gains.max_tilt_rad),
         }
     }
 
@@ -197,6 +200,9 @@ impl<M: HamiltonianModel> FlightController<M> {
         if faults.is_fault() {
             return self.safe(faults);
         }
+        if self.tilt.max_rad != self.gains.max_tilt_rad {
+            self.tilt = TiltLimit::new(self.gains.max_tilt_rad);
+        }
         let g = &self.gains;
         let t = self.model.terms(state);
         let m = t.mass_kg;
@@ -226,7 +232,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             &(sp.j_m_s3 * m),
             sp.yaw_rad,
             sp.yaw_rate_rad_s,
-            g.max_tilt_rad,
+            &self.tilt,
         );
         faults.tilt_limited = att.tilt_limited;
         let e_r = crate::lie::rotation_error(r, &att.rot);

@@ -148,7 +148,8 @@ impl Airframe {
         // 2. The collective moves as little as possible to make room for roll/pitch.
         let (lo, hi) = min_max(&rp);
         let wanted = u.thrust_n / 4.0;
-        let mean = wanted.clamp(-lo, (t_max - hi).max(-lo));
+        // max/min rather than clamp: no panic path even for bounds that cross.
+        let mean = wanted.min(t_max - hi).max(-lo);
         sat.thrust = mean != wanted;
         // 3. Yaw gets what is left at that collective.
         let mut yaw_scale = 1.0f32;
@@ -160,7 +161,7 @@ impl Airframe {
                 yaw_scale = yaw_scale.min(base / -y);
             }
         }
-        let yaw_scale = yaw_scale.clamp(0.0, 1.0);
+        let yaw_scale = yaw_scale.max(0.0).min(1.0);
         sat.yaw = yaw_scale < 1.0;
         let mut share = [0.0f32; 4];
         for ((s, r), y) in share.iter_mut().zip(rp.iter()).zip(yaw.iter()) {
@@ -173,7 +174,7 @@ impl Airframe {
             .zip(cmd.rpm.iter_mut())
             .zip(share.iter())
         {
-            *t = (mean + s).clamp(0.0, t_max);
+            *t = (mean + s).max(0.0).min(t_max);
             *r = libm::sqrtf(*t / self.kf_n_per_rpm2);
         }
         (cmd, sat)

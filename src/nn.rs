@@ -12,10 +12,34 @@ use serde::de::{Error as _, SeqAccess, Visitor};
 use serde::ser::SerializeTuple;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-/// The hidden-layer activation, tanh. Shared by inference and training (the host mirrors it).
+/// |x| beyond which tanh(x) rounds to ±1 in f32; the rational form below is clamped there.
+const TANH_CLAMP: f32 = 7.905_311;
+
+/// The hidden-layer activation, tanh, as a 13/6 rational function (the coefficients of Eigen's
+/// `generic_fast_tanh_float`): |error| < 4e-7 against the exact tanh for every f32 input
+/// (3.7e-7 measured on a 4·10⁵-point grid over [−9, 9]; `tests/nn.rs` checks it against
+/// `libm::tanhf`). On the Cortex-M4F it costs 11 multiply–adds and one division, against
+/// ≈ 70 instructions for `libm::tanhf` (which goes through `expm1f`): about a fifth of the
+/// whole control step. The host trains with the exact tanh; the difference is far below the
+/// parity tolerance of the core/host model tests (1e-4 relative).
 #[inline]
 pub fn tanh(x: f32) -> f32 {
-    libm::tanhf(x)
+    const A: [f32; 7] = [
+        4.893_524_6e-3,
+        6.372_619e-4,
+        1.485_722_4e-5,
+        5.122_297e-8,
+        -8.604_672e-11,
+        2.000_188e-13,
+        -2.760_768_5e-16,
+    ];
+    const B: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347e-4, 1.198_258_4e-6];
+    let x = x.max(-TANH_CLAMP).min(TANH_CLAMP);
+    let x2 = x * x;
+    let p = A.iter().rev().fold(0.0, |acc, c| acc * x2 + c) * x;
+    let q = B.iter().rev().fold(0.0, |acc, c| acc * x2 + c);
+    // q ≥ B[0] > 0 for every x: the division is always defined.
+    p / q
 }
 
 /// Softplus log(1 + eˣ), computed without overflow; used for positive diagonals.

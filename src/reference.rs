@@ -61,9 +61,30 @@ pub struct AttitudeReference {
     pub tilt_limited: bool,
 }
 
+/// A tilt limit with its cosine and sine precomputed (they cost two libm calls each step
+/// otherwise).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TiltLimit {
+    /// Largest angle between b₃* and world z (rad).
+    pub max_rad: f32,
+    cos: f32,
+    sin: f32,
+}
+
+impl TiltLimit {
+    /// A limit of `max_rad` (rad).
+    pub fn new(max_rad: f32) -> Self {
+        Self {
+            max_rad,
+            cos: libm::cosf(max_rad),
+            sin: libm::sinf(max_rad),
+        }
+    }
+}
+
 /// R* and ω* from the desired world force `f_w` (N) with its rate `f_dot_w` (N/s) and the yaw.
 ///
-/// b₃* = F/‖F‖ (tilted at most `max_tilt_rad` from world z; a force with no upward component
+/// b₃* = F/‖F‖ (tilted at most `tilt.max_rad` from world z; a force with no upward component
 /// gives b₃* = e₃), b₁c = [cos ψ*, sin ψ*, 0], b₂* = b₃* × b₁c / ‖·‖, b₁* = b₂* × b₃*. The rates
 /// differentiate these products exactly given Ḟ; while the tilt limit is active ḃ₃* is taken as
 /// zero.
@@ -72,11 +93,11 @@ pub fn desired_attitude(
     f_dot_w: &Vector3<f32>,
     yaw_rad: f32,
     yaw_rate_rad_s: f32,
-    max_tilt_rad: f32,
+    tilt: &TiltLimit,
 ) -> AttitudeReference {
     let e3 = Vector3::z();
     let n = f_w.norm();
-    let cos_max = libm::cosf(max_tilt_rad);
+    let cos_max = tilt.cos;
     let (b3, b3_dot, tilt_limited) = if !n.is_finite() || n <= 1e-6 || f_w.z <= 0.0 {
         (e3, Vector3::zeros(), true)
     } else {
@@ -88,7 +109,7 @@ pub fn desired_attitude(
             let horiz = Vector3::new(b3.x, b3.y, 0.0);
             let hn = horiz.norm();
             let dir = if hn > 1e-9 { horiz / hn } else { Vector3::x() };
-            let b3 = e3 * cos_max + dir * libm::sinf(max_tilt_rad);
+            let b3 = e3 * cos_max + dir * tilt.sin;
             (b3, Vector3::zeros(), true)
         }
     };

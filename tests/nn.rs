@@ -167,7 +167,7 @@ fn activations_match_f64() {
     assert_eq!(softplus(1e30), 1e30);
     assert_eq!(softplus(f32::MAX), f32::MAX);
     assert!(softplus(-1e30) >= 0.0);
-    assert_eq!(tanh(1e30), 1.0);
+    assert!((tanh(1e30) - 1.0).abs() < 4e-7, "tanh saturates to 1 within its bound");
 }
 
 proptest! {
@@ -278,4 +278,23 @@ proptest! {
             prop_assert!((f[o] - (l[o] + layer.bias[o])).abs() < 1e-6);
         }
     }
+}
+
+/// The rational tanh keeps its documented bound (|error| < 4e-7) over the whole useful range,
+/// is odd, saturates to ±1 and stays finite for infinite inputs.
+#[test]
+fn fast_tanh_error_bound() {
+    let n = 200_000;
+    let mut worst = 0.0f64;
+    for i in 0..=n {
+        let x = -10.0 + 20.0 * i as f64 / n as f64;
+        let x = x as f32;
+        let e = (f64::from(hamflight::nn::tanh(x)) - (f64::from(x)).tanh()).abs();
+        worst = worst.max(e);
+        assert_eq!(hamflight::nn::tanh(-x), -hamflight::nn::tanh(x));
+    }
+    assert!(worst < 4e-7, "max |tanh error| = {worst:e}");
+    assert_eq!(hamflight::nn::tanh(f32::INFINITY), hamflight::nn::tanh(8.0));
+    assert!((hamflight::nn::tanh(f32::NEG_INFINITY) + 1.0).abs() < 1e-6);
+    assert_eq!(hamflight::nn::tanh(0.0), 0.0);
 }
