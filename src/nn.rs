@@ -36,8 +36,9 @@ pub fn tanh(x: f32) -> f32 {
     const B: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347e-4, 1.198_258_4e-6];
     let x = x.max(-TANH_CLAMP).min(TANH_CLAMP);
     let x2 = x * x;
-    let p = A.iter().rev().fold(0.0, |acc, c| acc * x2 + c) * x;
-    let q = B.iter().rev().fold(0.0, |acc, c| acc * x2 + c);
+    // Horner from the highest coefficient (constant indices: checked at compile time).
+    let p = A[..6].iter().rev().fold(A[6], |acc, c| acc * x2 + c) * x;
+    let q = B[..3].iter().rev().fold(B[3], |acc, c| acc * x2 + c);
     // q ≥ B[0] > 0 for every x: the division is always defined.
     p / q
 }
