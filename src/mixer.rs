@@ -161,7 +161,7 @@ impl Airframe {
                 yaw_scale = yaw_scale.min(base / -y);
             }
         }
-        let yaw_scale = yaw_scale.max(0.0).min(1.0);
+        let yaw_scale = yaw_scale.clamp(0.0, 1.0); // constant bounds: the check folds away
         sat.yaw = yaw_scale < 1.0;
         let mut share = [0.0f32; 4];
         for ((s, r), y) in share.iter_mut().zip(rp.iter()).zip(yaw.iter()) {

@@ -34,7 +34,8 @@ pub fn tanh(x: f32) -> f32 {
         -2.760_768_5e-16,
     ];
     const B: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347e-4, 1.198_258_4e-6];
-    let x = x.max(-TANH_CLAMP).min(TANH_CLAMP);
+    // Constant bounds: clamp's bound check folds away at compile time.
+    let x = x.clamp(-TANH_CLAMP, TANH_CLAMP);
     let x2 = x * x;
     // Horner from the highest coefficient (constant indices: checked at compile time).
     let p = A[..6].iter().rev().fold(A[6], |acc, c| acc * x2 + c) * x;

@@ -167,7 +167,10 @@ fn activations_match_f64() {
     assert_eq!(softplus(1e30), 1e30);
     assert_eq!(softplus(f32::MAX), f32::MAX);
     assert!(softplus(-1e30) >= 0.0);
-    assert!((tanh(1e30) - 1.0).abs() < 4e-7, "tanh saturates to 1 within its bound");
+    assert!(
+        (tanh(1e30) - 1.0).abs() < 4e-7,
+        "tanh saturates to 1 within its bound"
+    );
 }
 
 proptest! {
