@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
 use crate::eval::{write_atomic, FlightLog};
@@ -128,64 +129,50 @@ pub fn path_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
 
 /// Position error |p − p*| (cm) against time for one or more flights.
 pub fn error_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, (900, 450)).into_drawing_area();
-        root.fill(&WHITE).map_err(pe)?;
-        let t_max = logs
-            .iter()
-            .map(|(_, l)| l.planned_duration_s)
-            .fold(0.1, f64::max);
-        let e_max = logs
-            .iter()
-            .flat_map(|(_, l)| l.err_m.iter())
-            .filter(|e| e.is_finite())
-            .fold(0.001, |a: f64, &b| a.max(b))
-            * 100.0
-            * 1.05;
-        let title = logs
-            .first()
-            .map(|(_, l)| format!("{}: position error", l.scenario))
-            .unwrap_or_default();
-        let mut ch = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(15)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..t_max, 0.0..e_max)
-            .map_err(pe)?;
-        ch.configure_mesh()
-            .x_desc("t (s)")
-            .y_desc("|p - p*| (cm)")
-            .draw()
-            .map_err(pe)?;
-        for (i, (name, l)) in logs.iter().enumerate() {
-            let c = PALETTE[i % PALETTE.len()];
-            ch.draw_series(LineSeries::new(
-                l.t_s
-                    .iter()
-                    .zip(&l.err_m)
-                    .filter(|(_, e)| e.is_finite())
-                    .map(|(t, e)| (*t, e * 100.0)),
-                c,
-            ))
-            .map_err(pe)?
-            .label(name.to_string())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-        }
-        ch.configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(pe)?;
-        root.present().map_err(pe)?;
-    }
-    write_atomic(path, buf.as_bytes())
+    let e_max = max_error_cm(logs, 0.1) * 1.05;
+    error_figure(logs, path, "position error", 0.0..e_max, |e| e * 100.0)
 }
 
 /// Position error against time on a logarithmic axis (cm), so that millimetre and decimetre
 /// errors read on one figure.
 pub fn error_log_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
+    let cm = |e: f64| (e * 100.0).max(1e-4);
+    let e_max = max_error_cm(logs, 0.01) * 1.5;
+    let e_min = logs
+        .iter()
+        .flat_map(|(_, l)| l.err_m.iter())
+        .filter(|e| e.is_finite())
+        .fold(e_max, |a: f64, &b| a.min(cm(b)))
+        .max(1e-3);
+    error_figure(
+        logs,
+        path,
+        "position error (log scale)",
+        (e_min..e_max).log_scale(),
+        cm,
+    )
+}
+
+/// The largest finite error of `logs` in cm, at least `floor_cm`.
+fn max_error_cm(logs: &[(&str, &FlightLog)], floor_cm: f64) -> f64 {
+    logs.iter()
+        .flat_map(|(_, l)| l.err_m.iter())
+        .filter(|e| e.is_finite())
+        .fold(floor_cm, |a: f64, &b| a.max(b * 100.0))
+}
+
+/// The error-against-time figure on the y axis `y` (linear or log), errors mapped by `to_y`.
+fn error_figure<Y>(
+    logs: &[(&str, &FlightLog)],
+    path: &Path,
+    what: &str,
+    y: Y,
+    to_y: impl Fn(f64) -> f64,
+) -> Result<()>
+where
+    Y: AsRangedCoord<Value = f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (900, 450)).into_drawing_area();
@@ -194,29 +181,16 @@ pub fn error_log_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
             .iter()
             .map(|(_, l)| l.planned_duration_s)
             .fold(0.1, f64::max);
-        let cm = |e: f64| (e * 100.0).max(1e-4);
-        let e_max = logs
-            .iter()
-            .flat_map(|(_, l)| l.err_m.iter())
-            .filter(|e| e.is_finite())
-            .fold(0.01, |a: f64, &b| a.max(cm(b)))
-            * 1.5;
-        let e_min = logs
-            .iter()
-            .flat_map(|(_, l)| l.err_m.iter())
-            .filter(|e| e.is_finite())
-            .fold(e_max, |a: f64, &b| a.min(cm(b)))
-            .max(1e-3);
         let title = logs
             .first()
-            .map(|(_, l)| format!("{}: position error (log scale)", l.scenario))
+            .map(|(_, l)| format!("{}: {what}", l.scenario))
             .unwrap_or_default();
         let mut ch = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 20))
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_max, (e_min..e_max).log_scale())
+            .build_cartesian_2d(0.0..t_max, y)
             .map_err(pe)?;
         ch.configure_mesh()
             .x_desc("t (s)")
@@ -230,7 +204,7 @@ pub fn error_log_svg(logs: &[(&str, &FlightLog)], path: &Path) -> Result<()> {
                     .iter()
                     .zip(&l.err_m)
                     .filter(|(_, e)| e.is_finite())
-                    .map(|(t, e)| (*t, cm(*e))),
+                    .map(|(t, e)| (*t, to_y(*e))),
                 c,
             ))
             .map_err(pe)?
