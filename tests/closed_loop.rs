@@ -155,3 +155,14 @@ fn adaptation_converges_to_a_constant_wind() {
         100.0 * rel
     );
 }
+
+/// A plant the model never saw: motor lag, rotor drag, ground effect and noisy state estimates.
+/// The adaptive controller still holds paper-spiral to millimetres.
+#[test]
+fn adaptive_holds_paper_spiral_on_a_less_ideal_plant() {
+    let sc = scenario("paper-spiral-realistic");
+    let r = fly("adaptive", &sc);
+    assert!(!r.crashed, "{r:?}");
+    let e = r.rmse_pos_window_m.expect("window scored");
+    assert!(e < 0.01, "adaptive on the realistic plant: {e:.4} m");
+}
