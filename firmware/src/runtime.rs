@@ -50,6 +50,37 @@ pub type BoardMotors = Motors<
     ErasedChannel<pac::TIM4>,
 >;
 
+/// The four motor outputs at 328 kHz, duty 0, enabled (crazyflie-firmware `motors_def.c`,
+/// CF2.x brushed). PA15 resets as JTDI (AF0); SWD needs only PA13/PA14, so it goes to TIM2 (AF1).
+/// Under QEMU the same timers are modelled and the pins are inert.
+pub fn board_motors(
+    tim2: pac::TIM2,
+    tim4: pac::TIM4,
+    pins: (
+        stm32f4xx_hal::gpio::PA1,
+        stm32f4xx_hal::gpio::PB11,
+        stm32f4xx_hal::gpio::PA15<stm32f4xx_hal::gpio::Alternate<0>>,
+        stm32f4xx_hal::gpio::PB9,
+    ),
+    clocks: &stm32f4xx_hal::rcc::Clocks,
+) -> BoardMotors {
+    use stm32f4xx_hal::prelude::*;
+    let (pa1, pb11, pa15, pb9) = pins;
+    let (_pwm2, (t2c1, t2c2, _t2c3, t2c4)) = tim2.pwm_hz(328.kHz(), clocks);
+    let (_pwm4, (_t4c1, _t4c2, _t4c3, t4c4)) = tim4.pwm_hz(328.kHz(), clocks);
+    let mut m1 = t2c2.with(pa1).erase();
+    let mut m2 = t2c4.with(pb11).erase();
+    let mut m3 = t2c1.with(pa15.into_alternate::<1>()).erase();
+    let mut m4 = t4c4.with(pb9).erase();
+    for m in [&mut m1, &mut m2, &mut m3] {
+        m.set_duty(0);
+        m.enable();
+    }
+    m4.set_duty(0);
+    m4.enable();
+    Motors { m1, m2, m3, m4 }
+}
+
 /// The step-cost counter of this build.
 #[cfg(feature = "qemu")]
 pub type Counter = SysTickCounter;

@@ -6,7 +6,6 @@
 
 use cortex_m_rt::entry;
 use defmt_rtt as _;
-use hamflight_firmware::motor::Motors;
 use hamflight_firmware::runtime;
 use panic_probe as _;
 use stm32f4xx_hal::pac::{self, interrupt};
@@ -35,22 +34,12 @@ fn main() -> ! {
     let gpiob = dp.GPIOB.split();
     let gpioc = dp.GPIOC.split();
 
-    // Motors (crazyflie-firmware motors_def.c, CF2.x brushed): M1 PA1 TIM2_CH2,
-    // M2 PB11 TIM2_CH4, M3 PA15 TIM2_CH1, M4 PB9 TIM4_CH4.
-    let (_pwm2, (t2c1, t2c2, _t2c3, t2c4)) = dp.TIM2.pwm_hz(328.kHz(), &clocks);
-    let (_pwm4, (_t4c1, _t4c2, _t4c3, t4c4)) = dp.TIM4.pwm_hz(328.kHz(), &clocks);
-    let mut m1 = t2c2.with(gpioa.pa1).erase();
-    let mut m2 = t2c4.with(gpiob.pb11).erase();
-    // PA15 resets as JTDI (AF0); SWD needs only PA13/PA14, so it can go to TIM2 (AF1).
-    let mut m3 = t2c1.with(gpioa.pa15.into_alternate::<1>()).erase();
-    let mut m4 = t4c4.with(gpiob.pb9).erase();
-    for m in [&mut m1, &mut m2, &mut m3] {
-        m.set_duty(0);
-        m.enable();
-    }
-    m4.set_duty(0);
-    m4.enable();
-    let motors = Motors { m1, m2, m3, m4 };
+    let motors = runtime::board_motors(
+        dp.TIM2,
+        dp.TIM4,
+        (gpioa.pa1, gpiob.pb11, gpioa.pa15, gpiob.pb9),
+        &clocks,
+    );
 
     let serial: Serial<pac::USART3> = match Serial::new(
         dp.USART3,

@@ -10,7 +10,6 @@
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
-use hamflight_firmware::motor::Motors;
 use hamflight_firmware::runtime;
 use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
@@ -29,20 +28,12 @@ fn main() -> ! {
     let gpioa = dp.GPIOA.split();
     let gpiob = dp.GPIOB.split();
 
-    // The same motor outputs as the Crazyflie (QEMU models TIM2..TIM5; the pins are inert).
-    let (_pwm2, (t2c1, t2c2, _t2c3, t2c4)) = dp.TIM2.pwm_hz(328.kHz(), &clocks);
-    let (_pwm4, (_t4c1, _t4c2, _t4c3, t4c4)) = dp.TIM4.pwm_hz(328.kHz(), &clocks);
-    let mut m1 = t2c2.with(gpioa.pa1).erase();
-    let mut m2 = t2c4.with(gpiob.pb11).erase();
-    let mut m3 = t2c1.with(gpioa.pa15.into_alternate::<1>()).erase();
-    let mut m4 = t4c4.with(gpiob.pb9).erase();
-    for m in [&mut m1, &mut m2, &mut m3] {
-        m.set_duty(0);
-        m.enable();
-    }
-    m4.set_duty(0);
-    m4.enable();
-    let motors = Motors { m1, m2, m3, m4 };
+    let motors = runtime::board_motors(
+        dp.TIM2,
+        dp.TIM4,
+        (gpioa.pa1, gpiob.pb11, gpioa.pa15, gpiob.pb9),
+        &clocks,
+    );
 
     let Ok(serial) = Serial::<pac::USART1>::new(
         dp.USART1,

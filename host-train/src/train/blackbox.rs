@@ -11,8 +11,8 @@
 //! Held-out errors are those of [`super::export::prediction_errors`] at the last step, the
 //! predicted R first projected to the nearest rotation; ‖RᵀR − I‖ is reported alongside.
 
-use super::data::{self, Batch, Windows, WINDOW_LEN};
-use super::model::{rotation_loss, to_vec, TMlp};
+use super::data::{self, Batch, StateBatch, Windows, WINDOW_LEN};
+use super::model::{to_vec, window_loss, TMlp};
 use super::r#loop::Adam;
 use super::TrainConfig;
 use anyhow::Result;
@@ -208,28 +208,13 @@ impl BlackBox {
     /// The structured model's loss ([`super::r#loop::batch_loss`]): mean over windows of
     /// Σₙ ℓ_p + ℓ_R + vel_weight ℓ_v + ℓ_ω.
     fn loss(&self, b: &Batch, fixed: &Tensor<2>, dt: f32, vel_weight: f32) -> Tensor<1> {
-        let mut total: Option<Tensor<2>> = None;
-        for (x, target) in self
-            .rollout(b, fixed, dt)
-            .iter()
-            .zip(b.states.iter().skip(1))
-        {
-            let lp = (x.p.clone() - target.p.clone()).square().sum_dim(1);
-            let lr = rotation_loss(x.r.clone().reshape([b.len, 3, 3]), target.rot.clone());
-            let lz = (x.v.clone() - target.v.clone())
-                .square()
-                .sum_dim(1)
-                .mul_scalar(vel_weight)
-                + (x.w.clone() - target.w.clone()).square().sum_dim(1);
-            let l = lp + lr + lz;
-            total = Some(match total {
-                Some(t) => t + l,
-                None => l,
-            });
-        }
-        total
-            .unwrap_or_else(|| Tensor::zeros([1, 1], &b.u.device()))
-            .mean()
+        let preds = self.rollout(b, fixed, dt).into_iter().map(|x| StateBatch {
+            p: x.p,
+            rot: x.r.reshape([b.len, 3, 3]),
+            v: x.v,
+            w: x.w,
+        });
+        window_loss(preds, b, vel_weight)
     }
 }
 

@@ -2,8 +2,9 @@
 //! constant and d = W a_j inside the ODE, loss ℓ_p + ℓ_R + ℓ_ζ summed over the window's
 //! predicted states, Adam on θ (J⁻¹, g), φ (W) and the a_j.
 
+use super::data::StateBatch;
 use super::data::{self, Batch, Windows};
-use super::model::{rotation_loss, to_vec, Consts, Forcing, TModel};
+use super::model::{to_vec, window_loss, Consts, Forcing, TModel};
 use super::TrainConfig;
 use burn::tensor::{Device, Tensor, TensorData};
 use hamflight::model::{ModelWeights, FEATURES};
@@ -80,26 +81,17 @@ pub fn batch_loss(
     let s0 = &b.states[0];
     let forcing = Forcing::new(c, b.u.clone(), a_all, b.realization.clone());
     let mut x = model.to_phase(c, s0.p.clone(), s0.rot.clone(), s0.v.clone(), s0.w.clone());
-    let mut total: Option<Tensor<2>> = None;
-    for target in b.states.iter().skip(1) {
+    let preds = (1..b.states.len()).map(|_| {
         x = model.rk4(c, &x, &forcing, dt_s);
         let (v, w) = model.velocities(c, &x);
-        let lp = (x.p.clone() - target.p.clone()).square().sum_dim(1);
-        let lr = rotation_loss(x.rot.clone(), target.rot.clone());
-        let lz = (v - target.v.clone())
-            .square()
-            .sum_dim(1)
-            .mul_scalar(vel_weight)
-            + (w - target.w.clone()).square().sum_dim(1);
-        let l = lp + lr + lz;
-        total = Some(match total {
-            Some(t) => t + l,
-            None => l,
-        });
-    }
-    total
-        .unwrap_or_else(|| Tensor::zeros([1, 1], &b.u.device()))
-        .mean()
+        StateBatch {
+            p: x.p.clone(),
+            rot: x.rot.clone(),
+            v,
+            w,
+        }
+    });
+    window_loss(preds, b, vel_weight)
 }
 
 /// Mean held-out loss per window, in chunks, without autodiff.

@@ -7,6 +7,7 @@
 //! `weight[o][i]`), its bias `[1, outputs]`. Batched vectors are `[B, 3]`, rotations `[B, 3, 3]`
 //! (row-major, so `reshape([B, 9])` gives q's rows r₁, r₂, r₃).
 
+use super::data::{Batch, StateBatch};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::learned::{
     CONTROL_SCALE, INERTIA_INV_EPS, INERTIA_INV_SCALE_PER_KG_M2, TORQUE_SCALE_NM, WRENCH_SCALE,
@@ -507,6 +508,33 @@ pub fn invert_sym3(m: Tensor<3>) -> Tensor<3> {
                                            // Columns bc, ca, ab: stack as rows then transpose.
     let rows = Tensor::stack::<3>(vec![bc, ca, ab], 1); // [B,3(row=col index),3]
     rows.swap_dims(1, 2) / det.reshape([bsz, 1, 1])
+}
+
+/// The TSE(3) loss of a predicted window (paper Sec. 3): Σₙ ℓ_p + ℓ_R + `vel_weight`·ℓ_v + ℓ_ω
+/// per window over the predicted states x₁..x_N against `b`'s, then the mean over the batch.
+pub fn window_loss(
+    preds: impl IntoIterator<Item = StateBatch>,
+    b: &Batch,
+    vel_weight: f32,
+) -> Tensor<1> {
+    let mut total: Option<Tensor<2>> = None;
+    for (x, target) in preds.into_iter().zip(b.states.iter().skip(1)) {
+        let lp = (x.p - target.p.clone()).square().sum_dim(1);
+        let lr = rotation_loss(x.rot, target.rot.clone());
+        let lz = (x.v - target.v.clone())
+            .square()
+            .sum_dim(1)
+            .mul_scalar(vel_weight)
+            + (x.w - target.w.clone()).square().sum_dim(1);
+        let l = lp + lr + lz;
+        total = Some(match total {
+            Some(t) => t + l,
+            None => l,
+        });
+    }
+    total
+        .unwrap_or_else(|| Tensor::zeros([1, 1], &b.u.device()))
+        .mean()
 }
 
 /// ‖log(R̄ Rᵀ)^∨‖² per window [B,1], from sin²θ = ‖vee(E)‖² by the series
