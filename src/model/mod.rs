@@ -51,6 +51,18 @@ pub trait HamiltonianModel {
     }
 }
 
+/// A borrowed model is a model: the controller can fly a `&'static LearnedModel` whose weights
+/// stay in flash (a `static` built at compile time) instead of a 10 KB copy in RAM.
+impl<M: HamiltonianModel + ?Sized> HamiltonianModel for &M {
+    fn terms(&self, state: &State) -> ModelTerms {
+        (**self).terms(state)
+    }
+
+    fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {
+        (**self).dynamics(state, u, a)
+    }
+}
+
 /// Width of every hidden layer. A performance knob: the whole control step must fit the MCU budget.
 pub const HIDDEN: usize = 16;
 /// Number of disturbance features p (columns of W).

@@ -12,7 +12,7 @@ use host_train::Scenario;
 use std::path::{Path, PathBuf};
 
 fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
 }
 
 fn scenario(name: &str) -> Scenario {
