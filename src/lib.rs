@@ -15,6 +15,7 @@
 //! - [`control`]: the IDA-PBC tracking law and the [`FlightController`];
 //! - [`adapt`]: the disturbance adaptation law;
 //! - [`mixer`]: wrench to rotor commands with saturation;
+//! - [`fpu`]: fused multiply–add dense layers and square root on the M4F's FPU, bit-identical on the host;
 //! - [`blob`]: the checked weight-blob codec.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(missing_docs)]
@@ -22,6 +23,7 @@
 pub mod adapt;
 pub mod blob;
 pub mod control;
+pub mod fpu;
 pub mod lie;
 pub mod mixer;
 pub mod model;

@@ -175,7 +175,7 @@ impl Airframe {
             .zip(share.iter())
         {
             *t = (mean + s).max(0.0).min(t_max);
-            *r = libm::sqrtf(*t / self.kf_n_per_rpm2);
+            *r = crate::fpu::sqrt(*t / self.kf_n_per_rpm2);
         }
         (cmd, sat)
     }

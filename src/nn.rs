@@ -8,6 +8,7 @@
 //! Weights are stored row-major by output (`weight[o][i]`), as PyTorch's and burn's `Linear`
 //! store their transpose; the host exporter writes them in this layout.
 
+use crate::fpu;
 use serde::de::{Error as _, SeqAccess, Visitor};
 use serde::ser::SerializeTuple;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -79,14 +80,12 @@ impl<const I: usize, const O: usize> Dense<I, O> {
     /// Number of parameters (weights and biases).
     pub const PARAMS: usize = I * O + O;
 
-    /// y = W x + b.
+    /// y = W x + b, each output one chain of fused multiply–adds from its bias in input order
+    /// ([`fpu::affine`]): bit-identical on the MCU and the host, one instruction per multiply–add on
+    /// the M4F.
     #[inline]
     pub fn forward(&self, x: &[f32; I]) -> [f32; O] {
-        let mut y = self.bias;
-        for (yo, row) in y.iter_mut().zip(self.weight.iter()) {
-            *yo += dot(row, x);
-        }
-        y
+        fpu::affine(&self.weight, &self.bias, x)
     }
 
     /// The linear part only, dy = W dx (the layer's Jacobian applied to a tangent).
