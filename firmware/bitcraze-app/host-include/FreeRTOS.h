@@ -1,0 +1,10 @@
+/* Host stand-in for FreeRTOS.h: the tick type and M2T, at 1000 ticks/s as on the Crazyflie. */
+#ifndef HF_HOST_FREERTOS_H
+#define HF_HOST_FREERTOS_H
+
+#include <stdint.h>
+
+typedef uint32_t TickType_t;
+#define M2T(X) ((TickType_t)(X))
+
+#endif
