@@ -31,7 +31,7 @@
  *   - OFF: !supervisorCanFly() (not armed, locked, crashed, tumbled), or a stop setpoint: z in
  *     modeDisable with thrust below 1000 (the commander's null setpoint when no setpoint
  *     arrives, cflib's stop and zero-thrust attitude setpoints). Output zero, adaptation reset,
- *     the next engagement starts over.
+ *     the next engagement starts over. Checked at every 1 kHz tick, not only at the control rate.
  *   - GROUND: engaged (the position and yaw at that tick become the reference until the setpoint
  *     says otherwise, and z_ground := the estimated z), not yet airborne. Output live,
  *     ADAPTATION FROZEN at a = 0.
@@ -304,16 +304,17 @@ bool controllerOutOfTreeTest(void) { return isInit && hf_self_test(); }
 void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
                          const sensorData_t *sensors, const state_t *state,
                          const stabilizerStep_t tick) {
-  if (!RATE_DO_EXECUTE(HAMFLIGHT_RATE_HZ, tick)) {
-    return;
-  }
+  /* Off is checked at every 1 kHz tick, so a stop acts within 1 ms whatever the rate. */
   if (!isInit || !supervisorCanFly() ||
       (setpoint->mode.z == modeDisable && !(setpoint->thrust >= HF_STOP_THRUST))) {
     zeroOutput(control);
-    if (isInit) {
+    if (isInit && phase != HF_PHASE_OFF) {
       disengage();
       updateLogs();
     }
+    return;
+  }
+  if (!RATE_DO_EXECUTE(HAMFLIGHT_RATE_HZ, tick)) {
     return;
   }
   applyParams();

@@ -1,7 +1,8 @@
 /*
- * The host's param/log table: PARAM_* and LOG_* macros (param.h, log.h) emit entries into the
- * linker sections hf_host_params and hf_host_logs, as Bitcraze's put theirs in .param.* and
- * .log.*; host_harness.c walks them by name.
+ * The host's param/log table: the PARAM_* and LOG_* macros (param.h, log.h) build one array per
+ * group, as Bitcraze's do, and a constructor registers each array with host_harness.c, which
+ * finds variables by group and name. (Bitcraze collects its arrays in .param.* and .log.*
+ * linker sections; a host linker may discard such sections, constructors it keeps.)
  */
 #ifndef HF_HOST_REGISTRY_H
 #define HF_HOST_REGISTRY_H
@@ -16,5 +17,8 @@ struct hf_host_var {
   const char *name;  /* variable name, or group name for the markers */
   void *address;
 };
+
+/* Registers a group's array (param nonzero: parameters, else logs); called by constructors. */
+void hf_host_register(int param, const struct hf_host_var *group);
 
 #endif

@@ -143,26 +143,37 @@ int hf_host_tick(uint32_t tick, float wrench[4]) {
 
 /* ---- params and logs by name ---- */
 
-extern const struct hf_host_var __start_hf_host_params[];
-extern const struct hf_host_var __stop_hf_host_params[];
-extern const struct hf_host_var __start_hf_host_logs[];
-extern const struct hf_host_var __stop_hf_host_logs[];
+#define HF_HOST_MAX_GROUPS 8
+
+static const struct hf_host_var *paramGroups[HF_HOST_MAX_GROUPS];
+static const struct hf_host_var *logGroups[HF_HOST_MAX_GROUPS];
+
+void hf_host_register(int param, const struct hf_host_var *group) {
+  const struct hf_host_var **groups = param ? paramGroups : logGroups;
+  for (int i = 0; i < HF_HOST_MAX_GROUPS; i++) {
+    if (groups[i] == NULL) {
+      groups[i] = group;
+      return;
+    }
+  }
+}
 
 /* The address of parameter (param nonzero) or log variable group.name, with its type in *type;
  * NULL if there is none. */
 void *hf_host_find(int param, const char *group, const char *name, uint32_t *type) {
-  const struct hf_host_var *v = param ? __start_hf_host_params : __start_hf_host_logs;
-  const struct hf_host_var *end = param ? __stop_hf_host_params : __stop_hf_host_logs;
-  const char *current = "";
-  for (; v < end; v++) {
-    if (v->type == HF_HOST_GROUP_START) {
-      current = v->name;
-    } else if (v->type != HF_HOST_GROUP_STOP && strcmp(current, group) == 0 &&
-               strcmp(v->name, name) == 0) {
-      if (type) {
-        *type = v->type;
+  const struct hf_host_var *const *groups = param ? paramGroups : logGroups;
+  for (int i = 0; i < HF_HOST_MAX_GROUPS && groups[i] != NULL; i++) {
+    const struct hf_host_var *v = groups[i];
+    if (strcmp(v->name, group) != 0) {
+      continue;
+    }
+    for (v++; v->type != HF_HOST_GROUP_STOP; v++) {
+      if (strcmp(v->name, name) == 0) {
+        if (type) {
+          *type = v->type;
+        }
+        return v->address;
       }
-      return v->address;
     }
   }
   return NULL;

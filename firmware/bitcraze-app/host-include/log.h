@@ -12,15 +12,17 @@
 #define LOG_INT32 6
 #define LOG_FLOAT 7
 
-#define LOG_GROUP_START(NAME)                                                    \
-  static const struct hf_host_var hf_host_logs_##NAME[]                          \
-      __attribute__((section("hf_host_logs"), used, aligned(sizeof(void *)))) = { \
-          {HF_HOST_GROUP_START, #NAME, 0},
+#define LOG_GROUP_START(NAME)                             \
+  static const struct hf_host_var hf_host_logs_##NAME[] = { \
+      {HF_HOST_GROUP_START, #NAME, 0},
 
 #define LOG_ADD(TYPE, NAME, ADDRESS) {(TYPE), #NAME, (void *)(ADDRESS)},
 
-#define LOG_GROUP_STOP(NAME) \
-  {HF_HOST_GROUP_STOP, #NAME, 0}, \
-  };
+#define LOG_GROUP_STOP(NAME)                                                  \
+  {HF_HOST_GROUP_STOP, #NAME, 0},                                               \
+  };                                                                            \
+  __attribute__((constructor)) static void hf_host_register_logs_##NAME(void) { \
+    hf_host_register(0, hf_host_logs_##NAME);                                 \
+  }
 
 #endif

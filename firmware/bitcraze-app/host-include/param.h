@@ -15,15 +15,17 @@
 #define PARAM_UINT32 (PARAM_4BYTES | PARAM_TYPE_INT | PARAM_UNSIGNED)
 #define PARAM_FLOAT (PARAM_4BYTES | PARAM_TYPE_FLOAT | PARAM_SIGNED)
 
-#define PARAM_GROUP_START(NAME)                                                    \
-  static const struct hf_host_var hf_host_params_##NAME[]                          \
-      __attribute__((section("hf_host_params"), used, aligned(sizeof(void *)))) = { \
-          {HF_HOST_GROUP_START, #NAME, 0},
+#define PARAM_GROUP_START(NAME)                             \
+  static const struct hf_host_var hf_host_params_##NAME[] = { \
+      {HF_HOST_GROUP_START, #NAME, 0},
 
 #define PARAM_ADD(TYPE, NAME, ADDRESS) {(TYPE), #NAME, (void *)(ADDRESS)},
 
-#define PARAM_GROUP_STOP(NAME) \
-  {HF_HOST_GROUP_STOP, #NAME, 0}, \
-  };
+#define PARAM_GROUP_STOP(NAME)                                                  \
+  {HF_HOST_GROUP_STOP, #NAME, 0},                                               \
+  };                                                                            \
+  __attribute__((constructor)) static void hf_host_register_params_##NAME(void) { \
+    hf_host_register(1, hf_host_params_##NAME);                                 \
+  }
 
 #endif
