@@ -52,6 +52,9 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+/* controller.h declares the OOT entry points under CONFIG_CONTROLLER_OOT. */
+#include "autoconf.h"
+
 #include "FreeRTOS.h"
 #include "app.h"
 #include "controller.h"

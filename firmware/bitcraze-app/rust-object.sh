@@ -8,6 +8,7 @@
 #   2. `objcopy --keep-global-symbols`: every symbol but the API in SYMS becomes local, so
 #      nothing of Rust's (memcpy, __aeabi_* of compiler_builtins, mangled names) can clash with
 #      newlib or libgcc in the firmware link; the embedded LLVM bitcode and debug info go.
+#      (With LTO the archive is several MB, mostly bitcode; the object is ~44 KB.)
 # Bitcraze's Rust proof of concept instead copies the archive as app.o and links it with
 # --whole-archive; this keeps the firmware's own link untouched.
 #
@@ -29,8 +30,11 @@ for s in $api; do
 done
 # shellcheck disable=SC2086 # roots is a list of options
 "${cross}ld" -r --gc-sections $roots -o "$out.partial" "$lib"
+# .note.GNU-stack goes too: Bitcraze's C objects carry none, and ld warns when it links objects
+# with and without it into one built-in.o (the image link sets -z noexecstack itself).
 "${cross}objcopy" --keep-global-symbols="$syms" --strip-debug \
-    --remove-section=.llvmbc --remove-section=.llvmcmd "$out.partial" "$out.tmp"
+    --remove-section=.llvmbc --remove-section=.llvmcmd --remove-section=.note.GNU-stack \
+    "$out.partial" "$out.tmp"
 rm -f "$out.partial"
 defined=$("${cross}nm" -g --defined-only "$out.tmp" | awk '{print $3}')
 for s in $api; do

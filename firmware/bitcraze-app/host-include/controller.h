@@ -2,6 +2,7 @@
 #ifndef __CONTROLLER_H__
 #define __CONTROLLER_H__
 
+#include "autoconf.h"
 #include "stabilizer_types.h"
 
 typedef enum {
@@ -11,14 +12,18 @@ typedef enum {
   ControllerTypeINDI,
   ControllerTypeBrescianini,
   ControllerTypeLee,
+#ifdef CONFIG_CONTROLLER_OOT
   ControllerTypeOot,
+#endif
   ControllerType_COUNT,
 } ControllerType;
 
+#ifdef CONFIG_CONTROLLER_OOT
 void controllerOutOfTreeInit(void);
 bool controllerOutOfTreeTest(void);
 void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
                          const sensorData_t *sensors, const state_t *state,
                          const stabilizerStep_t stabilizerStep);
+#endif
 
 #endif
