@@ -648,3 +648,46 @@ fn runs_at_500_hz_on_even_ticks_and_refuses_bad_gains() {
     let after = shim.tick(); // 8 executes
     assert!(after[2].abs() > before[2].abs(), "{before:?} -> {after:?}");
 }
+
+#[test]
+fn absolute_yaw_setpoints_are_in_degrees() {
+    let sc = scenario("hover");
+    let mut plant = sc.plant();
+    let p = plant.state().p_m.cast::<f32>();
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    fly_shim(&mut shim, &mut plant, 3.0, |s, _| {
+        s.set_setpoint([ABS; 4], p.into(), [0.0; 3], 45.0, 0.0, 0.0, false)
+    });
+    let yaw_deg = plant.state().rpy().z.to_degrees();
+    assert!(
+        (yaw_deg - 45.0).abs() < 1.0,
+        "yaw {yaw_deg}° for a 45° setpoint"
+    );
+    let drift = (plant.state().p_m.cast::<f32>() - p).norm();
+    // 1.4 cm measured 3 s after the 45° step.
+    assert!(drift < 0.03, "holds position while turning: {drift} m");
+}
+
+#[test]
+fn a_degenerate_quaternion_is_a_state_fault_with_zero_output() {
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let zero_q = [0.0f32; 4];
+    let v = [0.0f32; 3];
+    let p = [0.0f32, 0.0, 0.5];
+    // SAFETY: arrays of three (four) floats; exclusive.
+    unsafe {
+        hf_host_set_state(
+            p.as_ptr(),
+            zero_q.as_ptr(),
+            v.as_ptr(),
+            v.as_ptr(),
+            v.as_ptr(),
+        )
+    };
+    shim.set_setpoint([ABS; 4], p, [0.0; 3], 0.0, 0.0, 0.0, false);
+    assert_eq!(shim.tick(), [0.0; 4]);
+    let faults = shim.log_u32("faults");
+    assert_eq!(faults & 0x1F, 1, "HF_FAULT_BAD_STATE only: {faults:#x}");
+}
