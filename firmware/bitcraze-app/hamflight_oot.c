@@ -42,6 +42,16 @@
  *   - LANDED: airborne and supervisorIsFlying() turned false (Bitcraze says so after 2 s of low
  *     thrust): a is reset, back to GROUND with z_ground := the estimated z.
  *
+ * Stack: the core's step needs about 2.2 KB of stack (FlightController::step alone has a 952-byte
+ * frame); the stabilizer task has 1,800 bytes in all (STABILIZER_TASK_STACKSIZE, fixed in
+ * Bitcraze's config.h). So the step runs in the app task (CONFIG_APP_STACKSIZE words of stack,
+ * at the stabilizer's priority, app-config): controllerOutOfTree prepares the inputs, hands them
+ * over with a semaphore and waits for the result, at most HF_WORKER_TIMEOUT_TICKS. A step that
+ * does not come back in time, or a worker that is not running (yet, or after a failed
+ * hf_self_test), gives a zero wrench and HF_SHIM_WORKER_TIMEOUT in the faults log; until a late
+ * step has finished, the stabilizer does not touch the controller. The host tests build with HAMFLIGHT_STEP_INLINE, which
+ * calls the same serveStep() directly.
+ *
  * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
  * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m).
  * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
@@ -56,6 +66,9 @@
 #include "autoconf.h"
 
 #include "FreeRTOS.h"
+#ifndef HAMFLIGHT_STEP_INLINE
+#include "semphr.h"
+#endif
 #include "app.h"
 #include "controller.h"
 #include "log.h"
@@ -86,6 +99,12 @@
 #define HF_STOP_THRUST 1000.0f
 #define HF_DEFAULT_LEASH_M 0.3f
 
+/* Shim-level fault bit of the faults log: the worker did not return the step in time. */
+#define HF_SHIM_WORKER_TIMEOUT (1u << 16)
+/* How long the stabilizer waits for the worker, in FreeRTOS ticks of 1 ms: 2, because a
+ * 1-tick timeout ends at the next tick interrupt, which may come at once. */
+#define HF_WORKER_TIMEOUT_TICKS 2
+
 enum { HF_PHASE_OFF = 0, HF_PHASE_GROUND = 1, HF_PHASE_AIRBORNE = 2 };
 
 static hf_controller_t ctl;
@@ -113,6 +132,47 @@ static float logA[HF_FEATURES];
 static uint32_t logFaults;
 static uint8_t logSat;
 static uint32_t logCycles;
+
+/* One step of the core on the inputs in hfState/hfSetpoint: the only deep call. */
+static void serveStep(void) {
+  const uint32_t start = DWT->CYCCNT;
+  hf_step(&ctl, &hfState, &hfSetpoint, HF_DT_S, &hfOut);
+  logCycles = DWT->CYCCNT - start;
+}
+
+#ifndef HAMFLIGHT_STEP_INLINE
+static StaticSemaphore_t requestBuffer;
+static StaticSemaphore_t doneBuffer;
+static SemaphoreHandle_t request;
+static SemaphoreHandle_t done;
+static volatile bool workerReady;
+/* The stabilizer numbers its requests; the worker reports the last one it finished. */
+static volatile uint32_t requestSeq;
+static volatile uint32_t doneSeq;
+#endif
+
+/* True if nothing else is touching the controller: the worker is idle (always, inline). */
+static bool workerIdle(void) {
+#ifdef HAMFLIGHT_STEP_INLINE
+  return true;
+#else
+  return workerReady && doneSeq == requestSeq;
+#endif
+}
+
+/* Runs the step on a stack that can hold it (call only when workerIdle()); false if it did not
+ * complete in time. */
+static bool runStep(void) {
+#ifdef HAMFLIGHT_STEP_INLINE
+  serveStep();
+  return true;
+#else
+  (void)xSemaphoreTake(done, 0); /* drop a late completion of an earlier request */
+  requestSeq = requestSeq + 1u;
+  xSemaphoreGive(request);
+  return xSemaphoreTake(done, HF_WORKER_TIMEOUT_TICKS) == pdTRUE && doneSeq == requestSeq;
+#endif
+}
 
 static void enableCycleCounter(void) {
   CoreDebug->DEMCR |= CoreDebug_DEMCR_TRCENA_Msk;
@@ -302,11 +362,19 @@ void controllerOutOfTreeInit(void) {
               (int)HAMFLIGHT_RATE_HZ);
 }
 
-bool controllerOutOfTreeTest(void) { return isInit && hf_self_test(); }
+/* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
+bool controllerOutOfTreeTest(void) { return isInit && hf_model_crc() != 0u; }
 
 void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
                          const sensorData_t *sensors, const state_t *state,
                          const stabilizerStep_t tick) {
+  /* A step still running in the worker (after a timeout) owns the controller: stay off. */
+  if (!workerIdle()) {
+    zeroOutput(control);
+    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
+    logFaults = hfOut.faults;
+    return;
+  }
   /* Off is checked at every 1 kHz tick, so a stop acts within 1 ms whatever the rate. */
   if (!isInit || !supervisorCanFly() ||
       (setpoint->mode.z == modeDisable && !(setpoint->thrust >= HF_STOP_THRUST))) {
@@ -325,9 +393,12 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   updatePhase(&hfState);
   convertSetpoint(setpoint, &hfState, &hfSetpoint);
 
-  const uint32_t start = DWT->CYCCNT;
-  hf_step(&ctl, &hfState, &hfSetpoint, HF_DT_S, &hfOut);
-  logCycles = DWT->CYCCNT - start;
+  if (!runStep()) {
+    zeroOutput(control);
+    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
+    updateLogs();
+    return;
+  }
 
   control->controlMode = controlModeForceTorque;
   control->thrustSi = hfOut.thrust_n;
@@ -337,13 +408,33 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   updateLogs();
 }
 
-/* The app layer's entry point: the controller needs no task of its own. */
+/* The app task: the worker that runs the core's step (see "Stack" at the top). */
 void appMain(void) {
   DEBUG_PRINT("select with param stabilizer.controller = %d (out of tree)\n",
               (int)ControllerTypeOot);
+#ifdef HAMFLIGHT_STEP_INLINE
   for (;;) {
     vTaskDelay(M2T(60000));
   }
+#else
+  if (!hf_self_test()) {
+    DEBUG_PRINT("self test FAILED: the controller stays off\n");
+    for (;;) {
+      vTaskDelay(M2T(60000));
+    }
+  }
+  request = xSemaphoreCreateBinaryStatic(&requestBuffer);
+  done = xSemaphoreCreateBinaryStatic(&doneBuffer);
+  workerReady = true;
+  for (;;) {
+    if (xSemaphoreTake(request, portMAX_DELAY) == pdTRUE) {
+      const uint32_t seq = requestSeq;
+      serveStep();
+      doneSeq = seq;
+      xSemaphoreGive(done);
+    }
+  }
+#endif
 }
 
 PARAM_GROUP_START(hamflight)
