@@ -137,7 +137,7 @@ void hf_get_estimate(const hf_controller_t *ctl, float a[HF_FEATURES]);
 uint32_t hf_last_faults(const hf_controller_t *ctl);
 
 /* One hover step on a scratch controller: true if it has no fault and its thrust is within 20 %
- * of m*g. Used by controllerOutOfTreeTest. */
+ * of m*g. The shim's worker task runs it once when it starts. */
 bool hf_self_test(void);
 
 /* The compiled-in weight blob: its file name (NUL-terminated) and its body CRC-32 (IEEE). */
