@@ -162,8 +162,6 @@ fn build_host_c(manifest: &Path) {
         .file(host_inc.join("layout_check.c"))
         .include(&host_inc)
         .include(&inc)
-        // No FreeRTOS on the host: the shim calls its step directly instead of in the app task.
-        .define("HAMFLIGHT_STEP_INLINE", None)
         .std("gnu11")
         .warnings(true)
         .extra_warnings(true)

@@ -49,8 +49,7 @@
  * over with a semaphore and waits for the result, at most HF_WORKER_TIMEOUT_TICKS. A step that
  * does not come back in time, or a worker that is not running (yet, or after a failed
  * hf_self_test), gives a zero wrench and HF_SHIM_WORKER_TIMEOUT in the faults log; until a late
- * step has finished, the stabilizer does not touch the controller. The host tests build with HAMFLIGHT_STEP_INLINE, which
- * calls the same serveStep() directly.
+ * step has finished, the stabilizer does not touch the controller.
  *
  * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
  * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m).
@@ -66,15 +65,13 @@
 #include "autoconf.h"
 
 #include "FreeRTOS.h"
-#ifndef HAMFLIGHT_STEP_INLINE
-#include "semphr.h"
-#endif
 #include "app.h"
 #include "controller.h"
 #include "log.h"
 #include "param.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
+#include "semphr.h"
 #include "supervisor.h"
 #include "task.h"
 
@@ -140,7 +137,6 @@ static void serveStep(void) {
   logCycles = DWT->CYCCNT - start;
 }
 
-#ifndef HAMFLIGHT_STEP_INLINE
 static StaticSemaphore_t requestBuffer;
 static StaticSemaphore_t doneBuffer;
 static SemaphoreHandle_t request;
@@ -149,29 +145,17 @@ static volatile bool workerReady;
 /* The stabilizer numbers its requests; the worker reports the last one it finished. */
 static volatile uint32_t requestSeq;
 static volatile uint32_t doneSeq;
-#endif
 
-/* True if nothing else is touching the controller: the worker is idle (always, inline). */
-static bool workerIdle(void) {
-#ifdef HAMFLIGHT_STEP_INLINE
-  return true;
-#else
-  return workerReady && doneSeq == requestSeq;
-#endif
-}
+/* True if nothing else is touching the controller: the worker runs and is idle. */
+static bool workerIdle(void) { return workerReady && doneSeq == requestSeq; }
 
-/* Runs the step on a stack that can hold it (call only when workerIdle()); false if it did not
- * complete in time. */
+/* Runs the step in the worker (call only when workerIdle()); false if it did not complete in
+ * time. */
 static bool runStep(void) {
-#ifdef HAMFLIGHT_STEP_INLINE
-  serveStep();
-  return true;
-#else
   (void)xSemaphoreTake(done, 0); /* drop a late completion of an earlier request */
   requestSeq = requestSeq + 1u;
   xSemaphoreGive(request);
   return xSemaphoreTake(done, HF_WORKER_TIMEOUT_TICKS) == pdTRUE && doneSeq == requestSeq;
-#endif
 }
 
 static void enableCycleCounter(void) {
@@ -412,11 +396,6 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
 void appMain(void) {
   DEBUG_PRINT("select with param stabilizer.controller = %d (out of tree)\n",
               (int)ControllerTypeOot);
-#ifdef HAMFLIGHT_STEP_INLINE
-  for (;;) {
-    vTaskDelay(M2T(60000));
-  }
-#else
   if (!hf_self_test()) {
     DEBUG_PRINT("self test FAILED: the controller stays off\n");
     for (;;) {
@@ -434,7 +413,6 @@ void appMain(void) {
       xSemaphoreGive(done);
     }
   }
-#endif
 }
 
 PARAM_GROUP_START(hamflight)

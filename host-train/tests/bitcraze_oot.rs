@@ -4,7 +4,8 @@
 //! library, flown in the SITL the way crazyflie-firmware's stabilizer drives it: called at
 //! 1 kHz with `tick`, with the state as Bitcraze's estimator gives it (position, quaternion
 //! x y z w, world velocity) and the gyro in deg/s; its force/torque output is mixed with the
-//! core's mixer, as the native controller's is.
+//! core's mixer, as the native controller's is. The core's step runs in the shim's worker task
+//! (appMain, here a thread, with the FreeRTOS semaphores on pthreads), as on the vehicle.
 //!
 //! Run in release (`cargo test --release -p host-train --test bitcraze_oot`).
 
@@ -20,6 +21,7 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
 
 extern "C" {
     fn controllerOutOfTreeInit();
@@ -53,6 +55,8 @@ extern "C" {
         ty: *mut u32,
     ) -> *mut c_void;
     fn hf_host_debug_text() -> *const c_char;
+    fn hf_host_start_worker();
+    fn hf_host_stall_worker(on: bool);
 }
 
 /// Bitcraze's setpoint modes.
@@ -67,6 +71,12 @@ const PARAM_UINT8: u32 = 0x08;
 const LOG_UINT8: u32 = 1;
 const LOG_UINT32: u32 = 3;
 const LOG_FLOAT: u32 = 7;
+
+/// The shim's fault bit of the `faults` log: the worker task did not return the step in time.
+const WORKER_TIMEOUT: u32 = 1 << 16;
+
+/// The shim's worker task (appMain) runs in a thread, started once.
+static WORKER: OnceLock<()> = OnceLock::new();
 
 /// The shim is global C state: one test at a time holds it.
 static SHIM_LOCK: Mutex<()> = Mutex::new(());
@@ -111,6 +121,7 @@ impl Shim {
             _guard: guard,
             tick: 0,
         };
+        WORKER.get_or_init(|| shim.start_worker());
         let (f, b) = DEFAULTS.get_or_init(|| {
             (
                 F32_PARAMS.iter().map(|n| shim.param_f32(n)).collect(),
@@ -124,6 +135,32 @@ impl Shim {
             shim.set_param_u8(n, *v);
         }
         shim
+    }
+
+    /// Starts appMain, the shim's worker task, in a thread and waits until it serves steps
+    /// (a probe step stops reporting the worker timeout), then initialises the shim again.
+    fn start_worker(&mut self) {
+        // SAFETY: exclusive (the lock); the worker thread lives until the process ends.
+        unsafe { hf_host_start_worker() };
+        self.supervisor(true, false);
+        self.set_state(&PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0));
+        self.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+        let t0 = Instant::now();
+        loop {
+            self.tick = 0;
+            self.tick();
+            if self.log_u32("faults") & WORKER_TIMEOUT == 0 {
+                break;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "the worker starts");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // SAFETY: exclusive (the lock).
+        unsafe {
+            hf_host_reset();
+            controllerOutOfTreeInit();
+        }
+        self.tick = 0;
     }
 
     fn supervisor(&mut self, can_fly: bool, is_flying: bool) {
@@ -690,4 +727,62 @@ fn a_degenerate_quaternion_is_a_state_fault_with_zero_output() {
     assert_eq!(shim.tick(), [0.0; 4]);
     let faults = shim.log_u32("faults");
     assert_eq!(faults & 0x1F, 1, "HF_FAULT_BAD_STATE only: {faults:#x}");
+}
+
+/// Un-stalls the worker when dropped, so a failing test cannot hang the others.
+struct Stall;
+
+impl Stall {
+    fn on() -> Self {
+        // SAFETY: the flag is the harness's own, behind a mutex.
+        unsafe { hf_host_stall_worker(true) };
+        Stall
+    }
+}
+
+impl Drop for Stall {
+    fn drop(&mut self) {
+        // SAFETY: as above.
+        unsafe { hf_host_stall_worker(false) };
+    }
+}
+
+#[test]
+fn a_late_step_gives_zero_output_until_the_worker_is_back() {
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let s = PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0);
+    shim.set_state(&s);
+    shim.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+    assert!(shim.tick()[0] > 0.0, "tick 0 flies");
+    shim.tick();
+
+    // The worker hangs after its step: the stabilizer gives up after 2 ticks (host ticks of
+    // 200 ms) and outputs zero.
+    let stall = Stall::on();
+    let t0 = Instant::now();
+    assert_eq!(shim.tick(), [0.0; 4], "tick 2: the step came back too late");
+    assert!(
+        t0.elapsed() >= Duration::from_millis(350),
+        "waited for the timeout"
+    );
+    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+    shim.tick();
+    // Tick 4 hands over a step the hung worker cannot take: another timeout. From then on the
+    // worker owns the controller and the stabilizer does not wait any more.
+    assert_eq!(shim.tick(), [0.0; 4]);
+    let t1 = Instant::now();
+    assert_eq!(shim.tick(), [0.0; 4], "tick 5");
+    assert!(
+        t1.elapsed() < Duration::from_millis(100),
+        "no wait while the worker is busy"
+    );
+    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+
+    // Back: the next executed tick flies again.
+    drop(stall);
+    std::thread::sleep(Duration::from_millis(20));
+    let w = shim.tick();
+    assert!(w[0] > 0.0, "tick 6 flies again: {w:?}");
+    assert_eq!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
 }

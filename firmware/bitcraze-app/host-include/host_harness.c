@@ -3,6 +3,10 @@
  * stabilizer does, and implements the stubs of the stand-in headers. Host tests only (see
  * README.md); the Rust tests declare these functions in host-train/tests/bitcraze_oot.rs.
  */
+#define _POSIX_C_SOURCE 200809L
+
+#include <errno.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -10,8 +14,10 @@
 #include <string.h>
 #include <time.h>
 
+#include "app.h"
 #include "controller.h"
 #include "hf_host_registry.h"
+#include "semphr.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
 #include "supervisor.h"
@@ -25,7 +31,85 @@ static bool isFlying;
 bool supervisorCanFly(void) { return canFly; }
 bool supervisorIsFlying(void) { return isFlying; }
 
-void vTaskDelay(const TickType_t ticks) { (void)ticks; }
+void vTaskDelay(const TickType_t ticks) {
+  const struct timespec ts = {(time_t)(ticks / 1000u), (long)(ticks % 1000u) * 1000000L};
+  nanosleep(&ts, NULL);
+}
+
+/* ---- FreeRTOS binary semaphores on pthreads, and the worker task ---- */
+
+static pthread_t workerThread;
+static bool workerStarted;
+static pthread_mutex_t stallMutex = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t stallCond = PTHREAD_COND_INITIALIZER;
+static bool stalled;
+
+SemaphoreHandle_t xSemaphoreCreateBinaryStatic(StaticSemaphore_t *buffer) {
+  pthread_mutex_init(&buffer->mutex, NULL);
+  pthread_cond_init(&buffer->cond, NULL);
+  buffer->given = false;
+  return buffer;
+}
+
+BaseType_t xSemaphoreGive(SemaphoreHandle_t sem) {
+  if (workerStarted && pthread_equal(pthread_self(), workerThread)) {
+    /* hf_host_stall_worker: the worker hangs before it reports a step done. */
+    pthread_mutex_lock(&stallMutex);
+    while (stalled) {
+      pthread_cond_wait(&stallCond, &stallMutex);
+    }
+    pthread_mutex_unlock(&stallMutex);
+  }
+  pthread_mutex_lock(&sem->mutex);
+  const bool was = sem->given;
+  sem->given = true;
+  pthread_cond_signal(&sem->cond);
+  pthread_mutex_unlock(&sem->mutex);
+  return was ? pdFALSE : pdTRUE;
+}
+
+BaseType_t xSemaphoreTake(SemaphoreHandle_t sem, TickType_t ticks) {
+  struct timespec until;
+  clock_gettime(CLOCK_REALTIME, &until);
+  const uint64_t ms = (uint64_t)ticks * HF_HOST_TICK_MS;
+  until.tv_sec += (time_t)(ms / 1000u);
+  until.tv_nsec += (long)(ms % 1000u) * 1000000L;
+  if (until.tv_nsec >= 1000000000L) {
+    until.tv_sec += 1;
+    until.tv_nsec -= 1000000000L;
+  }
+  pthread_mutex_lock(&sem->mutex);
+  int rc = 0;
+  while (!sem->given && ticks != 0 && rc != ETIMEDOUT) {
+    rc = (ticks == portMAX_DELAY) ? pthread_cond_wait(&sem->cond, &sem->mutex)
+                                  : pthread_cond_timedwait(&sem->cond, &sem->mutex, &until);
+  }
+  const bool got = sem->given;
+  sem->given = false;
+  pthread_mutex_unlock(&sem->mutex);
+  return got ? pdTRUE : pdFALSE;
+}
+
+static void *workerMain(void *arg) {
+  (void)arg;
+  appMain();
+  return NULL;
+}
+
+/* Starts appMain (the shim's worker) in a thread, once per process. */
+void hf_host_start_worker(void) {
+  if (!workerStarted) {
+    workerStarted = pthread_create(&workerThread, NULL, workerMain, NULL) == 0;
+  }
+}
+
+/* While on, the worker hangs before reporting a step done (as a step that overruns would). */
+void hf_host_stall_worker(bool on) {
+  pthread_mutex_lock(&stallMutex);
+  stalled = on;
+  pthread_cond_broadcast(&stallCond);
+  pthread_mutex_unlock(&stallMutex);
+}
 
 static hf_host_dwt_t dwt;
 hf_host_core_debug_t hf_host_core_debug;
