@@ -339,7 +339,13 @@ void controllerOutOfTreeInit(void) {
     enableCycleCounter();
     isInit = true;
   }
-  disengage();
+  /* A late step still running in the worker owns the controller: then only mark the phase; the
+   * next engagement resets a anyway. */
+  if (!workerReady || workerIdle()) {
+    disengage();
+  } else {
+    phase = HF_PHASE_OFF;
+  }
   zeroWrench();
   updateLogs();
   DEBUG_PRINT("model %s crc %08X, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
