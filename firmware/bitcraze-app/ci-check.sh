@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# ci-check.sh: the embedded build of the Crazyflie library, checked the way the firmware will
+# link it. Called from .ci/run; runs from anywhere.
+#   1. cargo builds libhamflight_bitcraze.a for thumbv7em-none-eabihf (profile `bitcraze`), and
+#      clippy checks that build (the panic handler exists only there);
+#   2. rust-object.sh turns it into hamflight_rust.o, the object the app's Kbuild links;
+#   3. hard-float ABI: `readelf -A` of the object says Tag_ABI_VFP_args: VFP registers, and no
+#      member of the archive uses another float-argument convention (Bitcraze compiles with
+#      -mfloat-abi=hard -mfpu=fpv4-sp-d16; a soft-float object would not link);
+#   4. `nm -u`: every undefined symbol is in firmware-provides.txt;
+#   5. no panic formatting, no std/alloc: no core::fmt, panic_fmt, std::, alloc:: symbols;
+#   6. sizes (arm-none-eabi-size): data and bss are 0 (the controller's state lives in the C
+#      shim's storage), text under TEXT_BUDGET bytes.
+set -euo pipefail
+
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+repo=$(cd "$here/../.." && pwd)
+target=thumbv7em-none-eabihf
+target_dir=${CARGO_TARGET_DIR:-$repo/target}
+lib=$target_dir/$target/bitcraze/libhamflight_bitcraze.a
+out_dir=$target_dir/bitcraze-app
+obj=$out_dir/hamflight_rust.o
+# About 1.7x the measured 43.5 KB (of which the weights are 9.7 KB).
+TEXT_BUDGET=${TEXT_BUDGET:-75000}
+
+fail() {
+    echo "ci-check: FAIL: $*" >&2
+    exit 1
+}
+
+for tool in arm-none-eabi-ld arm-none-eabi-objcopy arm-none-eabi-nm arm-none-eabi-readelf arm-none-eabi-size; do
+    command -v "$tool" >/dev/null 2>&1 || fail "$tool not found (apt-get install binutils-arm-none-eabi)"
+done
+
+(cd "$repo" && cargo build -p hamflight-bitcraze --profile bitcraze --target "$target" \
+    && cargo clippy -p hamflight-bitcraze --profile bitcraze --target "$target" -- -D warnings)
+mkdir -p "$out_dir"
+"$here/rust-object.sh" "$lib" "$here/hamflight.syms" "$obj"
+
+# 3. hard-float ABI.
+attrs=$(arm-none-eabi-readelf -A "$obj")
+grep -q "Tag_ABI_VFP_args: VFP registers" <<<"$attrs" || fail "$obj does not use the VFP register ABI:
+$attrs"
+other=$(arm-none-eabi-readelf -A "$lib" 2>/dev/null | grep "Tag_ABI_VFP_args" | grep -v "VFP registers\|compatible" || true)
+[ -z "$other" ] || fail "archive members with another float ABI: $other"
+echo "hard-float ABI: Tag_ABI_VFP_args: VFP registers"
+
+# 4. undefined symbols.
+allowed=$(sed -e 's/#.*//' -e '/^[[:space:]]*$/d' "$here/firmware-provides.txt")
+undefined=$(arm-none-eabi-nm -u "$obj" | awk '{print $NF}')
+for s in $undefined; do
+    grep -qx "$s" <<<"$allowed" || fail "undefined symbol $s is not provided by the firmware (firmware-provides.txt)"
+done
+echo "undefined symbols: ${undefined:-none} (all provided by the firmware)"
+
+# Every global is the API.
+globals=$(arm-none-eabi-nm -g --defined-only "$obj" | awk '{print $3}' | sort)
+api=$(sed -e 's/#.*//' -e '/^[[:space:]]*$/d' "$here/hamflight.syms" | sort)
+[ "$globals" = "$api" ] || fail "global symbols differ from hamflight.syms: $globals"
+# And the API is the header's.
+for s in $api; do
+    grep -q "\b$s(" "$here/include/hamflight.h" || fail "$s is exported but not declared in include/hamflight.h"
+done
+
+# 5. no formatting, no std.
+forbidden=$(arm-none-eabi-nm -C "$obj" | grep -E "core::fmt|panic_fmt|std::|alloc::|__rust_alloc|rust_begin_unwind|rust_eh_personality" || true)
+[ -z "$forbidden" ] || fail "panic formatting or std linked in:
+$forbidden"
+echo "no core::fmt, panic_fmt, std or alloc symbols"
+
+# 6. sizes.
+arm-none-eabi-size "$obj"
+read -r text data bss _ <<<"$(arm-none-eabi-size "$obj" | awk 'NR==2 {print $1, $2, $3}')"
+[ "$data" -eq 0 ] && [ "$bss" -eq 0 ] || fail "the library has RAM state: data $data, bss $bss"
+[ "$text" -le "$TEXT_BUDGET" ] || fail "text $text B over the budget $TEXT_BUDGET B"
+echo "hamflight_rust.o: text $text B, data $data B, bss $bss B (budget $TEXT_BUDGET B of text)"

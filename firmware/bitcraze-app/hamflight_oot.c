@@ -1,0 +1,456 @@
+/*
+ * hamflight_oot.c: hamflight as the out-of-tree controller of Bitcraze's crazyflie-firmware.
+ *
+ * The stabilizer calls controllerOutOfTree() at every 1 kHz tick. This shim converts Bitcraze's
+ * estimate and setpoint into the core's conventions (include/hamflight.h), runs the core at
+ * 500 Hz (HAMFLIGHT_RATE_HZ = RATE_1000_HZ for 1 kHz), handles the flight phases and hands
+ * Bitcraze's power distribution a force/torque command (controlModeForceTorque).
+ *
+ * Conversions (stabilizer_types.h):
+ *   - attitude: state->attitudeQuaternion (x, y, z, w; body to world) -> R. state->attitude
+ *     (degrees, legacy inverted pitch) is not used.
+ *   - body rates: sensors->gyro (deg/s, body) -> rad/s.
+ *   - velocity: state->velocity is world frame; the core wants body frame: v = R^T v_world.
+ *   - accelerometer: sensors->acc (Gs, body) -> specific force in m/s^2 (carried for the
+ *     composite adaptation law; the current core step does not use it).
+ *   - setpoint, per axis x, y, z (setpoint->mode.x/y/z):
+ *       modeAbs      p* = position, with velocity, acceleration and jerk as feedforward;
+ *       modeVelocity the velocity is integrated into p* (the cfclient joystick, cflib velocity
+ *                    and hover commands), p* kept within `hamflight.leash` m of the estimate
+ *                    so that it cannot run away from a vehicle that cannot follow; velocity is
+ *                    the feedforward. velocity_body rotates (vx, vy) by the current yaw, as
+ *                    Bitcraze's own position controller does;
+ *       modeDisable  p* holds its last value on that axis (the position at engagement at
+ *                    first). This controller has no attitude mode: roll/pitch setpoints of a
+ *                    manual mode are not followed, the vehicle holds its position instead.
+ *     yaw (setpoint->mode.yaw): modeAbs attitude.yaw (deg) with attitudeRate.yaw (deg/s) as
+ *     feedforward; modeVelocity integrates attitudeRate.yaw; otherwise attitudeQuaternion's
+ *     yaw if mode.quat is modeAbs, else the last yaw reference.
+ *
+ * Flight phases, at every executed tick:
+ *   - OFF: !supervisorCanFly() (not armed, locked, crashed, tumbled), or a stop setpoint: z in
+ *     modeDisable with thrust below 1000 (the commander's null setpoint when no setpoint
+ *     arrives, cflib's stop and zero-thrust attitude setpoints). Output zero, adaptation reset,
+ *     the next engagement starts over. Checked at every 1 kHz tick, not only at the control rate.
+ *   - GROUND: engaged (the position and yaw at that tick become the reference until the setpoint
+ *     says otherwise, and z_ground := the estimated z), not yet airborne. Output live,
+ *     ADAPTATION FROZEN at a = 0.
+ *   - AIRBORNE: latched once supervisorIsFlying() and z - z_ground >= `hamflight.airHeight`
+ *     (0.05 m). Only then does the adaptation run (if `hamflight.adapt`), so that ground contact
+ *     (the floor pushing back while thrust builds up) is never learned as a disturbance.
+ *     supervisorIsFlying() alone is not enough: it turns true as soon as a motor spins over idle.
+ *   - LANDED: airborne and supervisorIsFlying() turned false (Bitcraze says so after 2 s of low
+ *     thrust): a is reset, back to GROUND with z_ground := the estimated z.
+ *
+ * Stack: the core's step needs about 2.2 KB of stack (FlightController::step alone has a 952-byte
+ * frame); the stabilizer task has 1,800 bytes in all (STABILIZER_TASK_STACKSIZE, fixed in
+ * Bitcraze's config.h). So the step runs in the app task (CONFIG_APP_STACKSIZE words of stack,
+ * at the stabilizer's priority, app-config): controllerOutOfTree prepares the inputs, hands them
+ * over with a semaphore and waits for the result, at most HF_WORKER_TIMEOUT_TICKS. A step that
+ * does not come back in time, or a worker that is not running (yet, or after a failed
+ * hf_self_test), gives a zero wrench and HF_SHIM_WORKER_TIMEOUT in the faults log; until a late
+ * step has finished, the stabilizer does not touch the controller.
+ *
+ * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
+ * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m).
+ * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
+ * 2 thrust, 3 tilt limit), phase (0 off, 1 ground, 2 airborne), thrust (N), tx ty tz (N*m),
+ * cycles (DWT cycles of the last hf_step).
+ */
+#include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+/* controller.h declares the OOT entry points under CONFIG_CONTROLLER_OOT. */
+#include "autoconf.h"
+
+#include "FreeRTOS.h"
+#include "app.h"
+#include "controller.h"
+#include "log.h"
+#include "param.h"
+#include "stabilizer_types.h"
+#include "stm32f4xx.h"
+#include "semphr.h"
+#include "supervisor.h"
+#include "task.h"
+
+#define DEBUG_MODULE "HAMFLIGHT"
+#include "debug.h"
+
+#include "hamflight.h"
+
+#ifndef HAMFLIGHT_RATE_HZ
+#define HAMFLIGHT_RATE_HZ RATE_500_HZ
+#endif
+#if HAMFLIGHT_RATE_HZ != RATE_500_HZ && HAMFLIGHT_RATE_HZ != RATE_1000_HZ
+#error "HAMFLIGHT_RATE_HZ must be RATE_500_HZ or RATE_1000_HZ"
+#endif
+
+#define HF_DT_S (1.0f / (float)HAMFLIGHT_RATE_HZ)
+#define HF_DEG_TO_RAD 0.017453292519943295f
+#define HF_PI 3.14159265358979f
+/* Bitcraze's accelerometer unit (G) in m/s^2 (its GRAVITY_MAGNITUDE). */
+#define HF_G_M_S2 9.81f
+/* Below this setpoint thrust (Bitcraze's 0..65535 scale), a setpoint without z is a stop. */
+#define HF_STOP_THRUST 1000.0f
+#define HF_DEFAULT_LEASH_M 0.3f
+
+/* Shim-level fault bit of the faults log: the worker did not return the step in time. */
+#define HF_SHIM_WORKER_TIMEOUT (1u << 16)
+/* How long the stabilizer waits for the worker, in FreeRTOS ticks of 1 ms: 2, because a
+ * 1-tick timeout ends at the next tick interrupt, which may come at once. */
+#define HF_WORKER_TIMEOUT_TICKS 2
+
+enum { HF_PHASE_OFF = 0, HF_PHASE_GROUND = 1, HF_PHASE_AIRBORNE = 2 };
+
+static hf_controller_t ctl;
+static bool isInit;
+static hf_state_t hfState;
+static hf_setpoint_t hfSetpoint;
+static hf_output_t hfOut;
+
+/* Flight phase. */
+static uint8_t phase = HF_PHASE_OFF;
+static float groundZ;
+/* The reference the setpoint modes build: position (world) and yaw. */
+static float refP[3];
+static float refYaw;
+
+/* Parameters. */
+static hf_gains_t gains;
+static uint8_t adaptOn = 1;
+static uint8_t resetRequest;
+static float airborneHeightM = 0.05f;
+static float leashM = HF_DEFAULT_LEASH_M;
+
+/* Logs. */
+static float logA[HF_FEATURES];
+static uint32_t logFaults;
+static uint8_t logSat;
+static uint32_t logCycles;
+
+/* One step of the core on the inputs in hfState/hfSetpoint: the only deep call. */
+static void serveStep(void) {
+  const uint32_t start = DWT->CYCCNT;
+  hf_step(&ctl, &hfState, &hfSetpoint, HF_DT_S, &hfOut);
+  logCycles = DWT->CYCCNT - start;
+}
+
+static StaticSemaphore_t requestBuffer;
+static StaticSemaphore_t doneBuffer;
+static SemaphoreHandle_t request;
+static SemaphoreHandle_t done;
+static volatile bool workerReady;
+/* The stabilizer numbers its requests; the worker reports the last one it finished. */
+static volatile uint32_t requestSeq;
+static volatile uint32_t doneSeq;
+
+/* True if nothing else is touching the controller: the worker runs and is idle. */
+static bool workerIdle(void) { return workerReady && doneSeq == requestSeq; }
+
+/* Runs the step in the worker (call only when workerIdle()); false if it did not complete in
+ * time. */
+static bool runStep(void) {
+  (void)xSemaphoreTake(done, 0); /* drop a late completion of an earlier request */
+  requestSeq = requestSeq + 1u;
+  xSemaphoreGive(request);
+  return xSemaphoreTake(done, HF_WORKER_TIMEOUT_TICKS) == pdTRUE && doneSeq == requestSeq;
+}
+
+static void enableCycleCounter(void) {
+  CoreDebug->DEMCR |= CoreDebug_DEMCR_TRCENA_Msk;
+  DWT->CTRL |= DWT_CTRL_CYCCNTENA_Msk;
+}
+
+static void zeroWrench(void) {
+  hfOut.thrust_n = 0.0f;
+  hfOut.torque_nm[0] = 0.0f;
+  hfOut.torque_nm[1] = 0.0f;
+  hfOut.torque_nm[2] = 0.0f;
+  hfOut.faults = 0;
+}
+
+static void zeroOutput(control_t *control) {
+  control->controlMode = controlModeForceTorque;
+  control->thrustSi = 0.0f;
+  control->torque[0] = 0.0f;
+  control->torque[1] = 0.0f;
+  control->torque[2] = 0.0f;
+  zeroWrench();
+}
+
+static void disengage(void) {
+  hf_reset(&ctl);
+  hf_set_adapt(&ctl, false);
+  phase = HF_PHASE_OFF;
+}
+
+static float wrapPi(float a) {
+  if (!(fabsf(a) <= 64.0f)) {
+    return 0.0f; /* non-finite or absurd: restart from 0 */
+  }
+  while (a > HF_PI) {
+    a -= 2.0f * HF_PI;
+  }
+  while (a <= -HF_PI) {
+    a += 2.0f * HF_PI;
+  }
+  return a;
+}
+
+/* R from a quaternion (x, y, z, w), body to world. With s = 2/|q|^2 the formula is exact for a
+ * quaternion of any non-zero length; a degenerate one gives NaN, which the core reports as
+ * HF_FAULT_BAD_STATE. */
+static void quatToRot(float x, float y, float z, float w, float r[3][3]) {
+  const float n2 = x * x + y * y + z * z + w * w;
+  const float s = (n2 > 0.25f && n2 < 4.0f) ? 2.0f / n2 : NAN;
+  r[0][0] = 1.0f - s * (y * y + z * z);
+  r[0][1] = s * (x * y - z * w);
+  r[0][2] = s * (x * z + y * w);
+  r[1][0] = s * (x * y + z * w);
+  r[1][1] = 1.0f - s * (x * x + z * z);
+  r[1][2] = s * (y * z - x * w);
+  r[2][0] = s * (x * z - y * w);
+  r[2][1] = s * (y * z + x * w);
+  r[2][2] = 1.0f - s * (x * x + y * y);
+}
+
+static float yawOfRot(const float r[3][3]) { return atan2f(r[1][0], r[0][0]); }
+
+static void convertState(const state_t *state, const sensorData_t *sensors, hf_state_t *s) {
+  const quaternion_t *q = &state->attitudeQuaternion;
+  quatToRot(q->x, q->y, q->z, q->w, s->rot);
+  s->p_m[0] = state->position.x;
+  s->p_m[1] = state->position.y;
+  s->p_m[2] = state->position.z;
+  const float vw[3] = {state->velocity.x, state->velocity.y, state->velocity.z};
+  for (int i = 0; i < 3; i++) {
+    /* (R^T v)_i = sum_j R_ji v_j */
+    s->v_body_m_s[i] = s->rot[0][i] * vw[0] + s->rot[1][i] * vw[1] + s->rot[2][i] * vw[2];
+  }
+  s->w_body_rad_s[0] = sensors->gyro.x * HF_DEG_TO_RAD;
+  s->w_body_rad_s[1] = sensors->gyro.y * HF_DEG_TO_RAD;
+  s->w_body_rad_s[2] = sensors->gyro.z * HF_DEG_TO_RAD;
+  s->specific_force_body_m_s2[0] = sensors->acc.x * HF_G_M_S2;
+  s->specific_force_body_m_s2[1] = sensors->acc.y * HF_G_M_S2;
+  s->specific_force_body_m_s2[2] = sensors->acc.z * HF_G_M_S2;
+  s->specific_force_valid = 1;
+}
+
+static float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+static void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoint_t *out) {
+  /* Yaw. */
+  float yawRate = 0.0f;
+  if (sp->mode.yaw == modeAbs) {
+    refYaw = wrapPi(sp->attitude.yaw * HF_DEG_TO_RAD);
+    yawRate = sp->attitudeRate.yaw * HF_DEG_TO_RAD;
+  } else if (sp->mode.yaw == modeVelocity) {
+    yawRate = sp->attitudeRate.yaw * HF_DEG_TO_RAD;
+    refYaw = wrapPi(refYaw + yawRate * HF_DT_S);
+  } else if (sp->mode.quat == modeAbs) {
+    const quaternion_t *q = &sp->attitudeQuaternion;
+    float r[3][3];
+    quatToRot(q->x, q->y, q->z, q->w, r);
+    refYaw = wrapPi(yawOfRot(r));
+  }
+  out->yaw_rad = refYaw;
+  out->yaw_rate_rad_s = yawRate;
+
+  /* Position, per axis. */
+  const stab_mode_t mode[3] = {sp->mode.x, sp->mode.y, sp->mode.z};
+  const float pos[3] = {sp->position.x, sp->position.y, sp->position.z};
+  const float acc[3] = {sp->acceleration.x, sp->acceleration.y, sp->acceleration.z};
+  const float jerk[3] = {sp->jerk.x, sp->jerk.y, sp->jerk.z};
+  float vel[3] = {sp->velocity.x, sp->velocity.y, sp->velocity.z};
+  if (sp->velocity_body) {
+    const float psi = yawOfRot(s->rot);
+    const float c = cosf(psi);
+    const float sn = sinf(psi);
+    const float vx = vel[0];
+    vel[0] = c * vx - sn * vel[1];
+    vel[1] = sn * vx + c * vel[1];
+  }
+  const float leash = (leashM > 0.0f && leashM < 100.0f) ? leashM : HF_DEFAULT_LEASH_M;
+  for (int i = 0; i < 3; i++) {
+    out->v_m_s[i] = 0.0f;
+    out->a_m_s2[i] = 0.0f;
+    out->j_m_s3[i] = 0.0f;
+    if (mode[i] == modeAbs) {
+      refP[i] = pos[i];
+      out->v_m_s[i] = vel[i];
+      out->a_m_s2[i] = acc[i];
+      out->j_m_s3[i] = jerk[i];
+    } else if (mode[i] == modeVelocity) {
+      refP[i] = clampf(refP[i] + vel[i] * HF_DT_S, s->p_m[i] - leash, s->p_m[i] + leash);
+      out->v_m_s[i] = vel[i];
+    }
+    out->p_m[i] = refP[i];
+  }
+}
+
+/* Apply parameter writes: gains (refused ones are reverted to what the core holds), reset. */
+static void applyParams(void) {
+  if (hf_set_gains(&ctl, &gains) != HF_OK) {
+    hf_get_gains(&ctl, &gains);
+  }
+  if (resetRequest) {
+    hf_reset(&ctl);
+    resetRequest = 0;
+  }
+}
+
+/* GROUND / AIRBORNE / LANDED (see the top of the file). */
+static void updatePhase(const hf_state_t *s) {
+  const bool flying = supervisorIsFlying();
+  if (phase == HF_PHASE_OFF) {
+    phase = HF_PHASE_GROUND;
+    groundZ = s->p_m[2];
+    for (int i = 0; i < 3; i++) {
+      refP[i] = s->p_m[i];
+    }
+    refYaw = yawOfRot(s->rot);
+    hf_reset(&ctl);
+  }
+  if (phase == HF_PHASE_GROUND && flying && s->p_m[2] - groundZ >= airborneHeightM) {
+    phase = HF_PHASE_AIRBORNE;
+  } else if (phase == HF_PHASE_AIRBORNE && !flying) {
+    phase = HF_PHASE_GROUND;
+    groundZ = s->p_m[2];
+    hf_reset(&ctl);
+  }
+  hf_set_adapt(&ctl, adaptOn && phase == HF_PHASE_AIRBORNE);
+}
+
+static void updateLogs(void) {
+  hf_get_estimate(&ctl, logA);
+  logFaults = hfOut.faults;
+  logSat = (uint8_t)(((hfOut.faults & HF_COND_SAT_YAW) ? 1u : 0u) |
+                     ((hfOut.faults & HF_COND_SAT_ROLL_PITCH) ? 2u : 0u) |
+                     ((hfOut.faults & HF_COND_SAT_THRUST) ? 4u : 0u) |
+                     ((hfOut.faults & HF_COND_TILT_LIMITED) ? 8u : 0u));
+}
+
+void controllerOutOfTreeInit(void) {
+  if (!isInit) {
+    hf_init(&ctl);
+    hf_get_gains(&ctl, &gains);
+    enableCycleCounter();
+    isInit = true;
+  }
+  /* A late step still running in the worker owns the controller: then only mark the phase; the
+   * next engagement resets a anyway. */
+  if (!workerReady || workerIdle()) {
+    disengage();
+  } else {
+    phase = HF_PHASE_OFF;
+  }
+  zeroWrench();
+  updateLogs();
+  DEBUG_PRINT("model %s crc %08X, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
+              (int)HAMFLIGHT_RATE_HZ);
+}
+
+/* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
+bool controllerOutOfTreeTest(void) { return isInit && hf_model_crc() != 0u; }
+
+void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
+                         const sensorData_t *sensors, const state_t *state,
+                         const stabilizerStep_t tick) {
+  /* A step still running in the worker (after a timeout) owns the controller: stay off. */
+  if (!workerIdle()) {
+    zeroOutput(control);
+    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
+    logFaults = hfOut.faults;
+    return;
+  }
+  /* Off is checked at every 1 kHz tick, so a stop acts within 1 ms whatever the rate. */
+  if (!isInit || !supervisorCanFly() ||
+      (setpoint->mode.z == modeDisable && !(setpoint->thrust >= HF_STOP_THRUST))) {
+    zeroOutput(control);
+    if (isInit && phase != HF_PHASE_OFF) {
+      disengage();
+      updateLogs();
+    }
+    return;
+  }
+  if (!RATE_DO_EXECUTE(HAMFLIGHT_RATE_HZ, tick)) {
+    return;
+  }
+  applyParams();
+  convertState(state, sensors, &hfState);
+  updatePhase(&hfState);
+  convertSetpoint(setpoint, &hfState, &hfSetpoint);
+
+  if (!runStep()) {
+    zeroOutput(control);
+    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
+    updateLogs();
+    return;
+  }
+
+  control->controlMode = controlModeForceTorque;
+  control->thrustSi = hfOut.thrust_n;
+  control->torque[0] = hfOut.torque_nm[0];
+  control->torque[1] = hfOut.torque_nm[1];
+  control->torque[2] = hfOut.torque_nm[2];
+  updateLogs();
+}
+
+/* The app task: the worker that runs the core's step (see "Stack" at the top). */
+void appMain(void) {
+  DEBUG_PRINT("select with param stabilizer.controller = %d (out of tree)\n",
+              (int)ControllerTypeOot);
+  if (!hf_self_test()) {
+    DEBUG_PRINT("self test FAILED: the controller stays off\n");
+    for (;;) {
+      vTaskDelay(M2T(60000));
+    }
+  }
+  request = xSemaphoreCreateBinaryStatic(&requestBuffer);
+  done = xSemaphoreCreateBinaryStatic(&doneBuffer);
+  workerReady = true;
+  for (;;) {
+    if (xSemaphoreTake(request, portMAX_DELAY) == pdTRUE) {
+      const uint32_t seq = requestSeq;
+      serveStep();
+      doneSeq = seq;
+      xSemaphoreGive(done);
+    }
+  }
+}
+
+PARAM_GROUP_START(hamflight)
+PARAM_ADD(PARAM_FLOAT, kp, &gains.k_p)
+PARAM_ADD(PARAM_FLOAT, kv, &gains.k_v)
+PARAM_ADD(PARAM_FLOAT, kR, &gains.k_r)
+PARAM_ADD(PARAM_FLOAT, kw, &gains.k_w)
+PARAM_ADD(PARAM_FLOAT, maxTilt, &gains.max_tilt_rad)
+PARAM_ADD(PARAM_FLOAT, cp, &gains.c_p)
+PARAM_ADD(PARAM_FLOAT, cv, &gains.c_v)
+PARAM_ADD(PARAM_FLOAT, cR, &gains.c_r)
+PARAM_ADD(PARAM_FLOAT, cw, &gains.c_w)
+PARAM_ADD(PARAM_FLOAT, aMax, &gains.a_max)
+PARAM_ADD(PARAM_UINT8, adapt, &adaptOn)
+PARAM_ADD(PARAM_UINT8, reset, &resetRequest)
+PARAM_ADD(PARAM_FLOAT, airHeight, &airborneHeightM)
+PARAM_ADD(PARAM_FLOAT, leash, &leashM)
+PARAM_GROUP_STOP(hamflight)
+
+LOG_GROUP_START(hamflight)
+LOG_ADD(LOG_FLOAT, a0, &logA[0])
+LOG_ADD(LOG_FLOAT, a1, &logA[1])
+LOG_ADD(LOG_FLOAT, a2, &logA[2])
+LOG_ADD(LOG_FLOAT, a3, &logA[3])
+LOG_ADD(LOG_FLOAT, a4, &logA[4])
+LOG_ADD(LOG_FLOAT, a5, &logA[5])
+LOG_ADD(LOG_UINT32, faults, &logFaults)
+LOG_ADD(LOG_UINT8, sat, &logSat)
+LOG_ADD(LOG_UINT8, phase, &phase)
+LOG_ADD(LOG_FLOAT, thrust, &hfOut.thrust_n)
+LOG_ADD(LOG_FLOAT, tx, &hfOut.torque_nm[0])
+LOG_ADD(LOG_FLOAT, ty, &hfOut.torque_nm[1])
+LOG_ADD(LOG_FLOAT, tz, &hfOut.torque_nm[2])
+LOG_ADD(LOG_UINT32, cycles, &logCycles)
+LOG_GROUP_STOP(hamflight)

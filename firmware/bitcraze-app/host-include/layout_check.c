@@ -1,0 +1,66 @@
+/*
+ * layout_check.c: the layout of include/hamflight.h as the host C compiler sees it, for the Rust
+ * test `abi::tests::header_layout_matches_rust`, which builds the same list from the Rust types
+ * in the same order. Host builds only.
+ */
+#include <stddef.h>
+#include <stdint.h>
+
+#include "hamflight.h"
+
+const uint32_t hf_c_layout[54] = {
+    sizeof(hf_controller_t),
+    _Alignof(hf_controller_t),
+    sizeof(hf_state_t),
+    offsetof(hf_state_t, p_m),
+    offsetof(hf_state_t, rot),
+    offsetof(hf_state_t, v_body_m_s),
+    offsetof(hf_state_t, w_body_rad_s),
+    offsetof(hf_state_t, specific_force_body_m_s2),
+    offsetof(hf_state_t, specific_force_valid),
+    offsetof(hf_state_t, reserved),
+    sizeof(hf_setpoint_t),
+    offsetof(hf_setpoint_t, p_m),
+    offsetof(hf_setpoint_t, v_m_s),
+    offsetof(hf_setpoint_t, a_m_s2),
+    offsetof(hf_setpoint_t, j_m_s3),
+    offsetof(hf_setpoint_t, yaw_rad),
+    offsetof(hf_setpoint_t, yaw_rate_rad_s),
+    sizeof(hf_output_t),
+    offsetof(hf_output_t, thrust_n),
+    offsetof(hf_output_t, torque_nm),
+    offsetof(hf_output_t, faults),
+    sizeof(hf_gains_t),
+    offsetof(hf_gains_t, k_p),
+    offsetof(hf_gains_t, k_v),
+    offsetof(hf_gains_t, k_r),
+    offsetof(hf_gains_t, k_w),
+    offsetof(hf_gains_t, max_tilt_rad),
+    offsetof(hf_gains_t, c_p),
+    offsetof(hf_gains_t, c_v),
+    offsetof(hf_gains_t, c_r),
+    offsetof(hf_gains_t, c_w),
+    offsetof(hf_gains_t, a_max),
+    HF_FEATURES,
+    HF_CONTROLLER_STORAGE_BYTES,
+    HF_FAULT_BAD_STATE,
+    HF_FAULT_BAD_SETPOINT,
+    HF_FAULT_BAD_DT,
+    HF_FAULT_NUMERIC,
+    HF_FAULT_NOT_INIT,
+    HF_FAULT_MASK,
+    HF_COND_SAT_YAW,
+    HF_COND_SAT_ROLL_PITCH,
+    HF_COND_SAT_THRUST,
+    HF_COND_TILT_LIMITED,
+    HF_OK,
+    HF_ERR_BAD_GAINS,
+    HF_ERR_NULL,
+    sizeof(bool),
+    sizeof(float),
+    _Alignof(hf_state_t),
+    _Alignof(hf_setpoint_t),
+    _Alignof(hf_output_t),
+    _Alignof(hf_gains_t),
+    0xC0DE,
+};

@@ -1,0 +1,154 @@
+/*
+ * hamflight.h: the C API of the hamflight flight core (libhamflight_bitcraze.a).
+ *
+ * The learned port-Hamiltonian model and the adaptive IDA-PBC law of "Physics-guided
+ * Learning-based Adaptive Control on the SE(3) Manifold" (Duong & Atanasov), in Rust, behind a
+ * small C ABI. The weights are compiled into the library (flash), so there is nothing to load.
+ *
+ * Conventions (those of the core, see src/model/state.rs and src/reference.rs):
+ *   - SI units throughout: m, m/s, m/s^2, rad, rad/s, N, N*m, s.
+ *   - World frame: z up (ENU-like, as the Crazyflie estimators use). Body frame: x forward,
+ *     y left, z up (the Crazyflie's body frame).
+ *   - rot[i][j] is entry (row i, column j) of R, the rotation that maps body-frame vectors to the
+ *     world frame (columns of R are the body axes in world coordinates).
+ *   - Velocities and angular velocities of the state are in the BODY frame; positions and the
+ *     whole setpoint are in the WORLD frame.
+ *
+ * Threading: a controller is plain memory; calls on one controller must not overlap (the
+ * Crazyflie calls it only from the stabilizer task). The functions never allocate, never block
+ * and never panic; NULL pointers are reported, never dereferenced.
+ *
+ * A test (firmware/bitcraze-app/src/abi.rs, `header_layout_matches_rust`) compiles this header
+ * with the host C compiler and checks every size, offset and constant below against the Rust
+ * definitions, so the two cannot drift apart silently.
+ */
+#ifndef HAMFLIGHT_H
+#define HAMFLIGHT_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Number of disturbance features p: the length of the adaptation estimate a. */
+#define HF_FEATURES 6
+
+/* Bytes of opaque storage a controller needs (the Rust side asserts its state fits). */
+#define HF_CONTROLLER_STORAGE_BYTES 256
+
+/* ---- Fault and condition flags (hf_output_t.faults, hf_last_faults) ----
+ * Any bit of HF_FAULT_MASK means the output is a zero wrench (motors off).
+ * The HF_COND_* bits are conditions: the output is still valid and used. */
+#define HF_FAULT_BAD_STATE (1u << 0)      /* a state component was NaN or infinite */
+#define HF_FAULT_BAD_SETPOINT (1u << 1)   /* a setpoint component was NaN or infinite */
+#define HF_FAULT_BAD_DT (1u << 2)         /* dt_s was not in (0, 0.1] s */
+#define HF_FAULT_NUMERIC (1u << 3)        /* the model or the law produced a non-finite value */
+#define HF_FAULT_NOT_INIT (1u << 4)       /* NULL pointer, or the controller was never hf_init'ed */
+#define HF_FAULT_MASK 0x1Fu
+#define HF_COND_SAT_YAW (1u << 8)         /* our mixer would scale yaw torque down */
+#define HF_COND_SAT_ROLL_PITCH (1u << 9)  /* our mixer would scale roll/pitch torque down */
+#define HF_COND_SAT_THRUST (1u << 10)     /* our mixer would shift the collective thrust */
+#define HF_COND_TILT_LIMITED (1u << 11)   /* the tilt limit shaped the desired attitude */
+
+/* Return values of hf_set_gains. */
+#define HF_OK 0u
+#define HF_ERR_BAD_GAINS 1u  /* a gain was NaN, infinite, negative, or max_tilt_rad not in (0, pi/2) */
+#define HF_ERR_NULL 2u       /* NULL pointer, or the controller was never hf_init'ed */
+
+/* Opaque controller storage. Zero it (static storage is) or call hf_init before any other call:
+ * a zeroed controller reports HF_FAULT_NOT_INIT and gives a zero wrench. */
+typedef struct hf_controller {
+  _Alignas(8) uint8_t opaque[HF_CONTROLLER_STORAGE_BYTES];
+} hf_controller_t;
+
+/* The vehicle state x = (q, zeta) as the core wants it (paper Sec. 2). 88 bytes. */
+typedef struct hf_state {
+  float p_m[3];          /* position p (m), world frame */
+  float rot[3][3];       /* attitude R, body to world; rot[i][j] = R_ij */
+  float v_body_m_s[3];   /* linear velocity v (m/s), BODY frame: v = R^T * (world velocity) */
+  float w_body_rad_s[3]; /* angular velocity omega (rad/s), body frame (the gyro) */
+  /* Measured specific force (accelerometer) in the body frame (m/s^2): what an IMU at rest
+   * reads is +9.81 along body z. Carried for the composite adaptation law
+   * (FlightController::step_measured); NOT YET USED by hf_step. */
+  float specific_force_body_m_s2[3];
+  uint8_t specific_force_valid; /* nonzero: specific_force_body_m_s2 holds a measurement */
+  uint8_t reserved[3];          /* zero */
+} hf_state_t;
+
+/* A flat-output setpoint (world frame). 56 bytes. */
+typedef struct hf_setpoint {
+  float p_m[3];          /* desired position p* (m) */
+  float v_m_s[3];        /* desired velocity (m/s) */
+  float a_m_s2[3];       /* desired acceleration (m/s^2), gravity not included */
+  float j_m_s3[3];       /* desired jerk (m/s^3) */
+  float yaw_rad;         /* desired yaw psi* (rad) about world z */
+  float yaw_rate_rad_s;  /* desired yaw rate (rad/s) */
+} hf_setpoint_t;
+
+/* What one step produces. 20 bytes. */
+typedef struct hf_output {
+  float thrust_n;        /* collective thrust along body z (N); 0 on a fault */
+  float torque_nm[3];    /* body torques about x, y, z (N*m); 0 on a fault */
+  uint32_t faults;       /* HF_FAULT_* | HF_COND_* */
+} hf_output_t;
+
+/* Gains and adaptation rates (the core's Gains; defaults documented in src/control.rs). 40 bytes. */
+typedef struct hf_gains {
+  float k_p;           /* position stiffness (N/m) */
+  float k_v;           /* velocity damping (N*s/m) */
+  float k_r;           /* attitude stiffness (N*m/rad) */
+  float k_w;           /* angular damping (N*m*s/rad) */
+  float max_tilt_rad;  /* largest tilt of the desired thrust axis from world z (rad), (0, pi/2) */
+  float c_p;           /* adaptation rate on the position error */
+  float c_v;           /* adaptation rate on the velocity error */
+  float c_r;           /* adaptation rate on the rotation error */
+  float c_w;           /* adaptation rate on the angular-velocity error */
+  float a_max;         /* projection radius: |a| never exceeds it */
+} hf_gains_t;
+
+/* Initialise: the compiled-in model, default gains, adaptation on, a = 0. NULL is ignored. */
+void hf_init(hf_controller_t *ctl);
+
+/* Reset the adaptation estimate (a = 0). Gains and the adaptation switch are kept. */
+void hf_reset(hf_controller_t *ctl);
+
+/* One control step of length dt_s (s): the IDA-PBC wrench, then one step of the adaptation law
+ * (if on). Writes *out (a zero wrench with HF_FAULT_* set on any fault) and returns out->faults.
+ * out may not be NULL (if it is, nothing is written and HF_FAULT_NOT_INIT is returned). */
+uint32_t hf_step(hf_controller_t *ctl, const hf_state_t *state, const hf_setpoint_t *setpoint,
+                 float dt_s, hf_output_t *out);
+
+/* Copy the gains into *out (zeros if ctl is not initialised). */
+void hf_get_gains(const hf_controller_t *ctl, hf_gains_t *out);
+
+/* Set the gains; HF_OK, or HF_ERR_BAD_GAINS / HF_ERR_NULL with the gains left unchanged. */
+uint32_t hf_set_gains(hf_controller_t *ctl, const hf_gains_t *gains);
+
+/* Switch the adaptation law on or off (off freezes a; it does not reset it). */
+void hf_set_adapt(hf_controller_t *ctl, bool on);
+bool hf_get_adapt(const hf_controller_t *ctl);
+
+/* Copy the adaptation estimate a (force features in m/s^2, torque features in 1e-3 N*m). */
+void hf_get_estimate(const hf_controller_t *ctl, float a[HF_FEATURES]);
+
+/* The faults and conditions of the last hf_step (HF_FAULT_NOT_INIT if none or not initialised). */
+uint32_t hf_last_faults(const hf_controller_t *ctl);
+
+/* One hover step on a scratch controller: true if it has no fault and its thrust is within 20 %
+ * of m*g. The shim's worker task runs it once when it starts. */
+bool hf_self_test(void);
+
+/* The compiled-in weight blob: its file name (NUL-terminated) and its body CRC-32 (IEEE). */
+const char *hf_model_name(void);
+uint32_t hf_model_crc(void);
+
+/* The vehicle mass (kg) the model was built for. */
+float hf_mass_kg(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* HAMFLIGHT_H */

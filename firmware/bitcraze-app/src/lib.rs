@@ -1,0 +1,273 @@
+//! # hamflight-bitcraze — hamflight as Bitcraze's out-of-tree controller
+//!
+//! The C ABI of `include/hamflight.h` over the core's [`FlightController`], flying a
+//! [`LearnedModel`] that is a `static` in flash: `build.rs` decodes the weight blob at build time
+//! into literal constants, so there is no RAM copy of the ~10 KB of weights and no decode at
+//! boot. The Crazyflie side (conversions from Bitcraze's `state_t`/`setpoint_t`, rates, flight
+//! phases, parameters and logs) is the C shim `hamflight_oot.c` next to this crate.
+//!
+//! Builds:
+//! - the firmware's library: `cargo build -p hamflight-bitcraze --profile bitcraze --target
+//!   thumbv7em-none-eabihf` (the app's `Makefile` does this);
+//! - the host: an rlib with the C shim, our stand-in Bitcraze headers (`host-include/`) and
+//!   their harness compiled in, for the tests in `host-train/tests/bitcraze_oot.rs`.
+//!
+//! Every exported function is allocation-free and panic-free and checks its pointers for NULL.
+//! On the target a panic (there is no reachable one) executes an undefined instruction, so the
+//! firmware's hard-fault handler takes over; it never formats a message.
+#![no_std]
+#![deny(missing_docs)]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+#[cfg(not(target_os = "none"))]
+extern crate std;
+
+pub mod abi;
+
+use abi::{HfController, HfGains, HfOutput, HfSetpoint, HfState};
+use hamflight::model::{LearnedModel, GRAVITY_M_S2, MASS_KG};
+use hamflight::{FlightController, Gains, Setpoint, State};
+
+/// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
+pub mod model {
+    include!(concat!(env!("OUT_DIR"), "/model.rs"));
+}
+
+/// Marks an initialised [`Inner`] ("HFCT").
+const MAGIC: u32 = 0x4846_4354;
+
+/// What lives in a [`HfController`]'s storage.
+#[repr(C)]
+struct Inner {
+    /// [`MAGIC`] once initialised; zeroed storage reads 0.
+    magic: u32,
+    /// The faults of the last step.
+    last_faults: u32,
+    ctl: FlightController<&'static LearnedModel>,
+}
+
+const _: () = {
+    assert!(core::mem::size_of::<Inner>() <= abi::CONTROLLER_STORAGE_BYTES);
+    assert!(core::mem::align_of::<Inner>() <= core::mem::align_of::<HfController>());
+};
+
+/// The controller in `p`, if `p` is non-null and initialised.
+///
+/// # Safety
+/// `p` is null or points to a `hf_controller_t` that is zeroed or was `hf_init`ed, and no other
+/// reference to it is live.
+unsafe fn inner_mut<'a>(p: *mut HfController) -> Option<&'a mut Inner> {
+    if p.is_null() {
+        return None;
+    }
+    let inner = p.cast::<Inner>();
+    // SAFETY: non-null, aligned (align of HfController ≥ align of Inner) and its first four
+    // bytes are initialised (zeroed or written by hf_init).
+    let magic = unsafe { core::ptr::read(inner.cast::<u32>()) };
+    // SAFETY: the magic says hf_init wrote a whole Inner here; exclusive by the contract.
+    (magic == MAGIC).then(|| unsafe { &mut *inner })
+}
+
+/// [`inner_mut`] for shared access.
+///
+/// # Safety
+/// As [`inner_mut`], with no mutable reference live.
+unsafe fn inner_ref<'a>(p: *const HfController) -> Option<&'a Inner> {
+    // SAFETY: forwarded contract; the result is only read.
+    unsafe { inner_mut(p.cast_mut()).map(|i| &*i) }
+}
+
+/// `hf_init`: the compiled-in model, default gains, adaptation on, a = 0. NULL is ignored.
+///
+/// # Safety
+/// `ctl` is null or points to writable `hf_controller_t` storage.
+#[no_mangle]
+pub unsafe extern "C" fn hf_init(ctl: *mut HfController) {
+    if ctl.is_null() {
+        return;
+    }
+    let inner = Inner {
+        magic: MAGIC,
+        last_faults: abi::FAULT_NOT_INIT,
+        ctl: FlightController::new(&model::MODEL, Gains::default()),
+    };
+    // SAFETY: non-null, writable and large and aligned enough (asserted above).
+    unsafe { ctl.cast::<Inner>().write(inner) };
+}
+
+/// `hf_reset`: a = 0.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_reset(ctl: *mut HfController) {
+    // SAFETY: the caller's contract.
+    if let Some(inner) = unsafe { inner_mut(ctl) } {
+        inner.ctl.reset();
+    }
+}
+
+/// `hf_step`: one control step; writes `*out` and returns its fault bits.
+///
+/// # Safety
+/// Each pointer is null or valid for its type (`ctl` zeroed or `hf_init`ed); no other access to
+/// `*ctl` runs at the same time.
+#[no_mangle]
+pub unsafe extern "C" fn hf_step(
+    ctl: *mut HfController,
+    state: *const HfState,
+    setpoint: *const HfSetpoint,
+    dt_s: f32,
+    out: *mut HfOutput,
+) -> u32 {
+    // SAFETY: the caller's contract for every pointer.
+    let (inner, state, setpoint, out) = unsafe {
+        (
+            inner_mut(ctl),
+            state.as_ref(),
+            setpoint.as_ref(),
+            out.as_mut(),
+        )
+    };
+    let Some(out) = out else {
+        return abi::FAULT_NOT_INIT;
+    };
+    *out = HfOutput {
+        faults: abi::FAULT_NOT_INIT,
+        ..HfOutput::default()
+    };
+    let (Some(inner), Some(state), Some(setpoint)) = (inner, state, setpoint) else {
+        return abi::FAULT_NOT_INIT;
+    };
+    let o = inner.ctl.step(&state.to_core(), &setpoint.to_core(), dt_s);
+    let faults = abi::fault_bits(&o.faults);
+    if !o.faults.is_fault() {
+        out.thrust_n = o.wrench.thrust_n;
+        out.torque_nm = o.wrench.torque_nm.into();
+    }
+    out.faults = faults;
+    inner.last_faults = faults;
+    faults
+}
+
+/// `hf_get_gains`: zeros if `ctl` is not initialised.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `out` null or writable.
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_gains(ctl: *const HfController, out: *mut HfGains) {
+    // SAFETY: the caller's contract.
+    let (inner, out) = unsafe { (inner_ref(ctl), out.as_mut()) };
+    if let Some(out) = out {
+        *out = inner
+            .map(|i| HfGains::from_core(&i.ctl.gains))
+            .unwrap_or_default();
+    }
+}
+
+/// `hf_set_gains`: `HF_OK`, or an error with the gains unchanged.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `gains` null or valid.
+#[no_mangle]
+pub unsafe extern "C" fn hf_set_gains(ctl: *mut HfController, gains: *const HfGains) -> u32 {
+    // SAFETY: the caller's contract.
+    let (Some(inner), Some(gains)) = (unsafe { inner_mut(ctl) }, unsafe { gains.as_ref() }) else {
+        return abi::ERR_NULL;
+    };
+    match gains.to_core(inner.ctl.gains.adapt) {
+        Some(g) => {
+            inner.ctl.gains = g;
+            abi::OK
+        }
+        None => abi::ERR_BAD_GAINS,
+    }
+}
+
+/// `hf_set_adapt`: the adaptation law on or off (off freezes a).
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_set_adapt(ctl: *mut HfController, on: bool) {
+    // SAFETY: the caller's contract.
+    if let Some(inner) = unsafe { inner_mut(ctl) } {
+        inner.ctl.gains.adapt = on;
+    }
+}
+
+/// `hf_get_adapt`: false if `ctl` is not initialised.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_adapt(ctl: *const HfController) -> bool {
+    // SAFETY: the caller's contract.
+    unsafe { inner_ref(ctl) }.is_some_and(|i| i.ctl.gains.adapt)
+}
+
+/// `hf_get_estimate`: copies a (zeros if `ctl` is not initialised).
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `a` null or valid for `HF_FEATURES` floats.
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_estimate(ctl: *const HfController, a: *mut [f32; abi::FEATURES]) {
+    // SAFETY: the caller's contract.
+    let (inner, a) = unsafe { (inner_ref(ctl), a.as_mut()) };
+    if let Some(a) = a {
+        *a = inner
+            .map(|i| i.ctl.estimate().into())
+            .unwrap_or([0.0; abi::FEATURES]);
+    }
+}
+
+/// `hf_last_faults`.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_last_faults(ctl: *const HfController) -> u32 {
+    // SAFETY: the caller's contract.
+    unsafe { inner_ref(ctl) }.map_or(abi::FAULT_NOT_INIT, |i| i.last_faults)
+}
+
+/// `hf_self_test`: one hover step on a scratch controller gives no fault and m g ± 20 %.
+#[no_mangle]
+pub extern "C" fn hf_self_test() -> bool {
+    let mut ctl = FlightController::new(&model::MODEL, Gains::default());
+    let o = ctl.step(&State::default(), &Setpoint::default(), 0.002);
+    let weight_n = MASS_KG * GRAVITY_M_S2;
+    !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n
+}
+
+/// `hf_model_name`: the blob's file name, NUL-terminated, static.
+#[no_mangle]
+pub extern "C" fn hf_model_name() -> *const core::ffi::c_char {
+    model::MODEL_NAME_NUL.as_ptr().cast()
+}
+
+/// `hf_model_crc`: the blob body's CRC-32.
+#[no_mangle]
+pub extern "C" fn hf_model_crc() -> u32 {
+    model::MODEL_CRC
+}
+
+/// `hf_mass_kg`.
+#[no_mangle]
+pub extern "C" fn hf_mass_kg() -> f32 {
+    MASS_KG
+}
+
+/// A panic is a bug (the API is panic-free): fault the CPU without formatting anything, so the
+/// firmware's hard-fault handler stops the motors.
+#[cfg(target_os = "none")]
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    loop {
+        // SAFETY: `udf` only raises the undefined-instruction fault.
+        unsafe { core::arch::asm!("udf #0") };
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,198 @@
+//! Unit tests of the C ABI, called as C would call it.
+
+use super::*;
+use crate::abi::*;
+use core::ptr;
+use nalgebra::Vector3;
+
+fn zeroed() -> HfController {
+    HfController {
+        opaque: [0; CONTROLLER_STORAGE_BYTES],
+    }
+}
+
+fn init() -> HfController {
+    let mut c = zeroed();
+    // SAFETY: valid storage.
+    unsafe { hf_init(&mut c) };
+    c
+}
+
+fn step(c: &mut HfController, s: &HfState, sp: &HfSetpoint, dt_s: f32) -> HfOutput {
+    let mut out = HfOutput::default();
+    // SAFETY: valid pointers.
+    let f = unsafe { hf_step(c, s, sp, dt_s, &mut out) };
+    assert_eq!(f, out.faults);
+    out
+}
+
+fn estimate(c: &HfController) -> [f32; FEATURES] {
+    let mut a = [f32::NAN; FEATURES];
+    // SAFETY: valid pointers.
+    unsafe { hf_get_estimate(c, &mut a) };
+    a
+}
+
+/// A state off the setpoint, so the law and the adaptation both act.
+fn displaced() -> HfState {
+    let s = State {
+        p_m: Vector3::new(0.05, -0.03, 0.48),
+        v_body_m_s: Vector3::new(0.1, 0.0, -0.05),
+        w_body_rad_s: Vector3::new(0.2, -0.1, 0.05),
+        ..State::default()
+    };
+    HfState::from_core(&s)
+}
+
+fn hover_sp() -> HfSetpoint {
+    HfSetpoint::from_core(&Setpoint::hover(Vector3::new(0.0, 0.0, 0.5), 0.0))
+}
+
+#[test]
+fn zeroed_storage_is_not_initialised_and_gives_zero_output() {
+    let mut c = zeroed();
+    let out = step(&mut c, &displaced(), &hover_sp(), 0.002);
+    assert_eq!(out.faults, FAULT_NOT_INIT);
+    assert_eq!((out.thrust_n, out.torque_nm), (0.0, [0.0; 3]));
+    // SAFETY: valid pointer.
+    assert_eq!(unsafe { hf_last_faults(&c) }, FAULT_NOT_INIT);
+    assert!(!unsafe { hf_get_adapt(&c) });
+    assert_eq!(estimate(&c), [0.0; FEATURES]);
+}
+
+#[test]
+fn null_pointers_are_reported_not_dereferenced() {
+    let mut c = init();
+    let (s, sp) = (displaced(), hover_sp());
+    let mut out = HfOutput::default();
+    // SAFETY: null or valid pointers throughout.
+    unsafe {
+        hf_init(ptr::null_mut());
+        hf_reset(ptr::null_mut());
+        assert_eq!(
+            hf_step(&mut c, &s, &sp, 0.002, ptr::null_mut()),
+            FAULT_NOT_INIT
+        );
+        assert_eq!(
+            hf_step(&mut c, ptr::null(), &sp, 0.002, &mut out),
+            FAULT_NOT_INIT
+        );
+        assert_eq!(out.thrust_n, 0.0);
+        assert_eq!(
+            hf_step(&mut c, &s, ptr::null(), 0.002, &mut out),
+            FAULT_NOT_INIT
+        );
+        assert_eq!(
+            hf_step(ptr::null_mut(), &s, &sp, 0.002, &mut out),
+            FAULT_NOT_INIT
+        );
+        assert_eq!(hf_set_gains(&mut c, ptr::null()), ERR_NULL);
+        hf_get_gains(&c, ptr::null_mut());
+        hf_get_estimate(&c, ptr::null_mut());
+        assert_eq!(hf_last_faults(ptr::null()), FAULT_NOT_INIT);
+    }
+}
+
+#[test]
+fn steps_match_the_native_controller_bit_for_bit() {
+    let mut c = init();
+    let mut native = FlightController::new(&model::MODEL, Gains::default());
+    let (s, sp) = (displaced(), hover_sp());
+    for _ in 0..50 {
+        let out = step(&mut c, &s, &sp, 0.002);
+        let o = native.step(&s.to_core(), &sp.to_core(), 0.002);
+        assert_eq!(out.faults, fault_bits(&o.faults));
+        assert_eq!(out.thrust_n, o.wrench.thrust_n);
+        assert_eq!(out.torque_nm, <[f32; 3]>::from(o.wrench.torque_nm));
+        assert_eq!(estimate(&c), <[f32; FEATURES]>::from(native.estimate()));
+    }
+    assert!(estimate(&c).iter().any(|a| *a != 0.0), "the adaptation ran");
+    assert_eq!(out_faults_of(&c) & FAULT_MASK, 0);
+}
+
+fn out_faults_of(c: &HfController) -> u32 {
+    // SAFETY: valid pointer.
+    unsafe { hf_last_faults(c) }
+}
+
+#[test]
+fn faults_give_a_zero_wrench() {
+    let mut c = init();
+    let mut s = displaced();
+    s.p_m[2] = f32::NAN;
+    let out = step(&mut c, &s, &hover_sp(), 0.002);
+    assert_ne!(out.faults & FAULT_BAD_STATE, 0);
+    assert_eq!((out.thrust_n, out.torque_nm), (0.0, [0.0; 3]));
+    let out = step(&mut c, &displaced(), &hover_sp(), 0.0);
+    assert_ne!(out.faults & FAULT_BAD_DT, 0);
+    let mut sp = hover_sp();
+    sp.yaw_rad = f32::INFINITY;
+    let out = step(&mut c, &displaced(), &sp, 0.002);
+    assert_ne!(out.faults & FAULT_BAD_SETPOINT, 0);
+    assert_eq!(out_faults_of(&c), out.faults);
+}
+
+#[test]
+fn adaptation_switch_freezes_and_reset_clears() {
+    let mut c = init();
+    let (s, sp) = (displaced(), hover_sp());
+    for _ in 0..10 {
+        step(&mut c, &s, &sp, 0.002);
+    }
+    let a = estimate(&c);
+    assert!(a.iter().any(|v| *v != 0.0));
+    // SAFETY: valid pointers.
+    unsafe { hf_set_adapt(&mut c, false) };
+    assert!(!unsafe { hf_get_adapt(&c) });
+    for _ in 0..10 {
+        step(&mut c, &s, &sp, 0.002);
+    }
+    assert_eq!(estimate(&c), a, "frozen while off");
+    // SAFETY: valid pointer.
+    unsafe { hf_reset(&mut c) };
+    assert_eq!(estimate(&c), [0.0; FEATURES]);
+    assert!(!unsafe { hf_get_adapt(&c) }, "reset keeps the switch");
+}
+
+#[test]
+fn gains_round_trip_and_bad_gains_are_refused() {
+    let mut c = init();
+    let mut g = HfGains::default();
+    // SAFETY: valid pointers throughout.
+    unsafe { hf_get_gains(&c, &mut g) };
+    assert_eq!(g, HfGains::from_core(&Gains::default()));
+    let stiffer = HfGains {
+        k_p: 2.0 * g.k_p,
+        ..g
+    };
+    assert_eq!(unsafe { hf_set_gains(&mut c, &stiffer) }, OK);
+    let bad = HfGains { k_v: f32::NAN, ..g };
+    assert_eq!(unsafe { hf_set_gains(&mut c, &bad) }, ERR_BAD_GAINS);
+    let mut now = HfGains::default();
+    unsafe { hf_get_gains(&c, &mut now) };
+    assert_eq!(now, stiffer, "a refused set leaves the last good gains");
+    assert!(
+        unsafe { hf_get_adapt(&c) },
+        "setting gains keeps the adaptation switch"
+    );
+}
+
+#[test]
+fn compiled_in_model_is_the_blob() {
+    let path = env!("HAMFLIGHT_BLOB_PATH");
+    let bytes = std::fs::read(path).expect("the blob build.rs read");
+    let from_blob = LearnedModel::from_blob(&bytes).expect("a valid blob");
+    assert_eq!(model::MODEL, from_blob, "every parameter bit-exact");
+    let body = &bytes[hamflight::blob::HEADER_LEN..bytes.len() - hamflight::blob::CRC_LEN];
+    assert_eq!(hf_model_crc(), hamflight::blob::crc32(body));
+    // SAFETY: a static NUL-terminated string.
+    let name = unsafe { core::ffi::CStr::from_ptr(hf_model_name()) };
+    let file = std::path::Path::new(path).file_name().unwrap();
+    assert_eq!(name.to_str().unwrap(), file.to_str().unwrap());
+}
+
+#[test]
+fn self_test_passes_and_mass_is_the_cores() {
+    assert!(hf_self_test());
+    assert_eq!(hf_mass_kg(), MASS_KG);
+}

@@ -1,0 +1,788 @@
+//! The Crazyflie out-of-tree controller through its C path: the very same shim the firmware
+//! builds (`firmware/bitcraze-app/hamflight_oot.c`), compiled for the host against our stand-in
+//! Bitcraze headers (`firmware/bitcraze-app/host-include/`) and linked with the host build of the
+//! library, flown in the SITL the way crazyflie-firmware's stabilizer drives it: called at
+//! 1 kHz with `tick`, with the state as Bitcraze's estimator gives it (position, quaternion
+//! x y z w, world velocity) and the gyro in deg/s; its force/torque output is mixed with the
+//! core's mixer, as the native controller's is. The core's step runs in the shim's worker task
+//! (appMain, here a thread, with the FreeRTOS semaphores on pthreads), as on the vehicle.
+//!
+//! Run in release (`cargo test --release -p host-train --test bitcraze_oot`).
+
+use hamflight::mixer::Airframe;
+use hamflight::{Gains, Wrench};
+use hamflight_bitcraze::model::MODEL;
+use host_train::controller::{Controller, TrajectoryPoint};
+use host_train::eval;
+use host_train::flight::CoreController;
+use host_train::plant::{Plant, PlantState};
+use host_train::Scenario;
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use std::ffi::{c_char, c_int, c_void, CStr, CString};
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
+
+extern "C" {
+    fn controllerOutOfTreeInit();
+    fn controllerOutOfTreeTest() -> bool;
+    fn hf_host_reset();
+    fn hf_host_set_supervisor(can_fly: bool, is_flying: bool);
+    fn hf_host_set_state(
+        p: *const f32,
+        q_xyzw: *const f32,
+        v_world: *const f32,
+        gyro_deg_s: *const f32,
+        acc_g: *const f32,
+    );
+    fn hf_host_set_setpoint(
+        modes: *const c_int,
+        p: *const f32,
+        v: *const f32,
+        a: *const f32,
+        j: *const f32,
+        yaw_deg: f32,
+        yaw_rate_deg_s: f32,
+        thrust: f32,
+        velocity_body: bool,
+    );
+    fn hf_host_set_null_setpoint();
+    fn hf_host_tick(tick: u32, wrench: *mut f32) -> c_int;
+    fn hf_host_find(
+        param: c_int,
+        group: *const c_char,
+        name: *const c_char,
+        ty: *mut u32,
+    ) -> *mut c_void;
+    fn hf_host_debug_text() -> *const c_char;
+    fn hf_host_start_worker();
+    fn hf_host_stall_worker(on: bool);
+}
+
+/// Bitcraze's setpoint modes.
+const DISABLE: c_int = 0;
+const ABS: c_int = 1;
+const VELOCITY: c_int = 2;
+/// `controlModeForceTorque`.
+const FORCE_TORQUE: c_int = 1;
+/// Bitcraze's PARAM_FLOAT, PARAM_UINT8; LOG_FLOAT, LOG_UINT8, LOG_UINT32.
+const PARAM_FLOAT: u32 = 0x06;
+const PARAM_UINT8: u32 = 0x08;
+const LOG_UINT8: u32 = 1;
+const LOG_UINT32: u32 = 3;
+const LOG_FLOAT: u32 = 7;
+
+/// The shim's fault bit of the `faults` log: the worker task did not return the step in time.
+const WORKER_TIMEOUT: u32 = 1 << 16;
+
+/// The shim's worker task (appMain) runs in a thread, started once.
+static WORKER: OnceLock<()> = OnceLock::new();
+
+/// The shim is global C state: one test at a time holds it.
+static SHIM_LOCK: Mutex<()> = Mutex::new(());
+
+/// Exclusive use of the C shim, freshly initialised (supervisor: cannot fly).
+struct Shim {
+    _guard: MutexGuard<'static, ()>,
+    tick: u32,
+}
+
+/// The float and byte parameters of group `hamflight`.
+const F32_PARAMS: [&str; 12] = [
+    "kp",
+    "kv",
+    "kR",
+    "kw",
+    "maxTilt",
+    "cp",
+    "cv",
+    "cR",
+    "cw",
+    "aMax",
+    "airHeight",
+    "leash",
+];
+const U8_PARAMS: [&str; 2] = ["adapt", "reset"];
+
+/// The parameters as the shim's first initialisation left them (its defaults).
+static DEFAULTS: OnceLock<(Vec<f32>, Vec<u8>)> = OnceLock::new();
+
+impl Shim {
+    /// The shim, initialised as at boot: the firmware keeps parameters across re-selections
+    /// of the controller, so every test restores the defaults the first one saw.
+    fn new() -> Self {
+        let guard = SHIM_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        // SAFETY: the lock gives exclusive use of the C globals.
+        unsafe {
+            hf_host_reset();
+            controllerOutOfTreeInit();
+        }
+        let mut shim = Self {
+            _guard: guard,
+            tick: 0,
+        };
+        WORKER.get_or_init(|| shim.start_worker());
+        let (f, b) = DEFAULTS.get_or_init(|| {
+            (
+                F32_PARAMS.iter().map(|n| shim.param_f32(n)).collect(),
+                U8_PARAMS.iter().map(|n| shim.param_u8(n)).collect(),
+            )
+        });
+        for (n, v) in F32_PARAMS.iter().zip(f) {
+            shim.set_param_f32(n, *v);
+        }
+        for (n, v) in U8_PARAMS.iter().zip(b) {
+            shim.set_param_u8(n, *v);
+        }
+        shim
+    }
+
+    /// Starts appMain, the shim's worker task, in a thread and waits until it serves steps
+    /// (a probe step stops reporting the worker timeout), then initialises the shim again.
+    fn start_worker(&mut self) {
+        // SAFETY: exclusive (the lock); the worker thread lives until the process ends.
+        unsafe { hf_host_start_worker() };
+        self.supervisor(true, false);
+        self.set_state(&PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0));
+        self.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+        let t0 = Instant::now();
+        loop {
+            self.tick = 0;
+            self.tick();
+            if self.log_u32("faults") & WORKER_TIMEOUT == 0 {
+                break;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "the worker starts");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // SAFETY: exclusive (the lock).
+        unsafe {
+            hf_host_reset();
+            controllerOutOfTreeInit();
+        }
+        self.tick = 0;
+    }
+
+    fn supervisor(&mut self, can_fly: bool, is_flying: bool) {
+        // SAFETY: exclusive (the lock).
+        unsafe { hf_host_set_supervisor(can_fly, is_flying) };
+    }
+
+    fn find(&self, param: bool, name: &str, ty: u32) -> *mut c_void {
+        let group = CString::new("hamflight").unwrap();
+        let cname = CString::new(name).unwrap();
+        let mut found = 0u32;
+        // SAFETY: valid C strings and out pointer.
+        let p = unsafe {
+            hf_host_find(
+                c_int::from(param),
+                group.as_ptr(),
+                cname.as_ptr(),
+                &mut found,
+            )
+        };
+        let kind = if param { "parameter" } else { "log" };
+        assert!(!p.is_null(), "{kind} hamflight.{name} exists");
+        assert_eq!(found, ty, "{kind} hamflight.{name} has type {ty}");
+        p
+    }
+
+    fn set_param_f32(&mut self, name: &str, v: f32) {
+        // SAFETY: a float parameter's address (type checked), exclusive.
+        unsafe { *self.find(true, name, PARAM_FLOAT).cast::<f32>() = v };
+    }
+
+    fn param_f32(&self, name: &str) -> f32 {
+        // SAFETY: as above.
+        unsafe { *self.find(true, name, PARAM_FLOAT).cast::<f32>() }
+    }
+
+    fn set_param_u8(&mut self, name: &str, v: u8) {
+        // SAFETY: a uint8 parameter's address (type checked), exclusive.
+        unsafe { *self.find(true, name, PARAM_UINT8).cast::<u8>() = v };
+    }
+
+    fn param_u8(&self, name: &str) -> u8 {
+        // SAFETY: as above.
+        unsafe { *self.find(true, name, PARAM_UINT8).cast::<u8>() }
+    }
+
+    fn log_f32(&self, name: &str) -> f32 {
+        // SAFETY: a float log variable's address (type checked).
+        unsafe { *self.find(false, name, LOG_FLOAT).cast::<f32>() }
+    }
+
+    fn log_u8(&self, name: &str) -> u8 {
+        // SAFETY: a uint8 log variable's address (type checked).
+        unsafe { *self.find(false, name, LOG_UINT8).cast::<u8>() }
+    }
+
+    fn log_u32(&self, name: &str) -> u32 {
+        // SAFETY: a uint32 log variable's address (type checked).
+        unsafe { *self.find(false, name, LOG_UINT32).cast::<u32>() }
+    }
+
+    /// The adaptation estimate a, from the logs.
+    fn estimate(&self) -> [f32; 6] {
+        ["a0", "a1", "a2", "a3", "a4", "a5"].map(|n| self.log_f32(n))
+    }
+
+    /// The plant's state as Bitcraze's estimator and sensors give it.
+    fn set_state(&mut self, s: &PlantState) {
+        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(s.rot));
+        let q = [q.i, q.j, q.k, q.w].map(|v| v as f32);
+        let p = s.p_m.cast::<f32>();
+        let v = s.v_world_m_s().cast::<f32>();
+        let gyro = s.w_body_rad_s.map(f64::to_degrees).cast::<f32>();
+        // The accelerometer at rest (1 G along body z); carried, not used by the law yet.
+        let acc = (s.rot.transpose() * Vector3::z()).cast::<f32>();
+        // SAFETY: arrays of three (four) floats; exclusive.
+        unsafe {
+            hf_host_set_state(
+                p.as_ptr(),
+                q.as_ptr(),
+                v.as_ptr(),
+                gyro.as_ptr(),
+                acc.as_ptr(),
+            )
+        };
+    }
+
+    /// An absolute setpoint (the high-level commander's): every axis and yaw in modeAbs.
+    fn set_abs_setpoint(&mut self, r: &TrajectoryPoint) {
+        let [p, v, a, j] = [r.p_m, r.v_m_s, r.a_m_s2, r.j_m_s3].map(|x| x.cast::<f32>());
+        let modes = [ABS; 4];
+        // SAFETY: arrays of four ints and three floats; exclusive.
+        unsafe {
+            hf_host_set_setpoint(
+                modes.as_ptr(),
+                p.as_ptr(),
+                v.as_ptr(),
+                a.as_ptr(),
+                j.as_ptr(),
+                r.yaw_rad.to_degrees() as f32,
+                r.yaw_rate_rad_s.to_degrees() as f32,
+                0.0,
+                false,
+            )
+        };
+    }
+
+    /// Any setpoint: modes x, y, z, yaw.
+    #[allow(clippy::too_many_arguments)]
+    fn set_setpoint(
+        &mut self,
+        modes: [c_int; 4],
+        p: [f32; 3],
+        v: [f32; 3],
+        yaw_deg: f32,
+        yaw_rate_deg_s: f32,
+        thrust: f32,
+        velocity_body: bool,
+    ) {
+        let z = [0.0f32; 3];
+        // SAFETY: as above.
+        unsafe {
+            hf_host_set_setpoint(
+                modes.as_ptr(),
+                p.as_ptr(),
+                v.as_ptr(),
+                z.as_ptr(),
+                z.as_ptr(),
+                yaw_deg,
+                yaw_rate_deg_s,
+                thrust,
+                velocity_body,
+            )
+        };
+    }
+
+    fn set_null_setpoint(&mut self) {
+        // SAFETY: exclusive.
+        unsafe { hf_host_set_null_setpoint() };
+    }
+
+    /// One 1 kHz stabilizer tick: control_t's (thrustSi, torque[3]).
+    fn tick(&mut self) -> [f32; 4] {
+        let mut w = [f32::NAN; 4];
+        // SAFETY: four floats; exclusive.
+        let mode = unsafe { hf_host_tick(self.tick, w.as_mut_ptr()) };
+        self.tick += 1;
+        assert_eq!(mode, FORCE_TORQUE, "controlModeForceTorque");
+        w
+    }
+
+    fn debug_text(&self) -> String {
+        // SAFETY: a NUL-terminated buffer owned by the harness.
+        unsafe { CStr::from_ptr(hf_host_debug_text()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+}
+
+/// The core's mixer on the shim's wrench: the rotor speeds the SITL plant takes.
+fn rpm_of(w: [f32; 4]) -> [f64; 4] {
+    let wrench = Wrench {
+        thrust_n: w[0],
+        torque_nm: Vector3::new(w[1], w[2], w[3]),
+    };
+    Airframe::default().mix(&wrench).0.rpm.map(f64::from)
+}
+
+/// The shim as a host [`Controller`], called once per 1 kHz tick with the scenario's reference.
+struct ShimController {
+    shim: Shim,
+}
+
+impl Controller for ShimController {
+    fn name(&self) -> &str {
+        "adaptive (C shim)"
+    }
+
+    fn reset(&mut self) {
+        self.shim.tick = 0;
+    }
+
+    fn step(&mut self, _t_s: f64, s: &PlantState, r: &TrajectoryPoint, _dt_s: f64) -> [f64; 4] {
+        self.shim.set_state(s);
+        self.shim.set_abs_setpoint(r);
+        rpm_of(self.shim.tick())
+    }
+
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        Some(self.shim.estimate().iter().map(|v| f64::from(*v)).collect())
+    }
+}
+
+fn scenario(name: &str) -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(format!("{name}.toml"));
+    Scenario::load(path).expect("scenario loads")
+}
+
+#[test]
+fn init_prints_the_model_and_the_self_test_passes() {
+    let shim = Shim::new();
+    let text = shim.debug_text();
+    let crc = format!("{:08X}", hamflight_bitcraze::model::MODEL_CRC);
+    assert!(
+        text.contains("HAMFLIGHT: model default.hfw crc ") && text.contains(&crc),
+        "DEBUG_PRINT at init names the blob and its CRC {crc}: {text:?}"
+    );
+    assert!(text.contains("500 Hz"), "{text:?}");
+    // SAFETY: exclusive (the shim holds the lock).
+    assert!(unsafe { controllerOutOfTreeTest() });
+    // The parameters start at the core's defaults (as the first initialisation left them).
+    let (f, b) = DEFAULTS.get().expect("recorded by Shim::new");
+    let g = Gains::default();
+    let r = g.rates;
+    let expected = [
+        g.k_p,
+        g.k_v,
+        g.k_r,
+        g.k_w,
+        g.max_tilt_rad,
+        r.c_p,
+        r.c_v,
+        r.c_r,
+        r.c_w,
+        r.a_max,
+        0.05,
+        0.3,
+    ];
+    assert_eq!(f.as_slice(), expected.as_slice(), "{F32_PARAMS:?}");
+    assert_eq!(b.as_slice(), [1, 0].as_slice(), "{U8_PARAMS:?}");
+    assert_eq!(shim.param_f32("kp"), g.k_p);
+}
+
+#[test]
+fn paper_spiral_through_the_c_path_matches_the_native_controller() {
+    let native_sc = scenario("paper-spiral");
+    let mut native = CoreController::new("adaptive", &MODEL, Gains::default());
+    let native_log = eval::fly(&native_sc, &mut native);
+
+    // The same flight with the shim at the stabilizer's 1 kHz (the physics stays at 1 kHz). It
+    // starts in the air and flying, so the airborne rule must not hold the adaptation back.
+    let mut c_sc = native_sc.clone();
+    c_sc.spec.control_hz = 1000.0;
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    shim.set_param_f32("airHeight", 0.0);
+    let mut c = ShimController { shim };
+    let c_log = eval::fly(&c_sc, &mut c);
+
+    assert!(native_log.crash_time_s.is_none() && c_log.crash_time_s.is_none());
+    assert_eq!(c_log.p_m.len(), 2 * native_log.p_m.len() - 1);
+    let max_diff_m = native_log
+        .p_m
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let q = c_log.p_m[2 * k];
+            (Vector3::from(*p) - Vector3::from(q)).norm()
+        })
+        .fold(0.0, f64::max);
+    println!("paper-spiral: C path vs native, largest position difference {max_diff_m:.3e} m");
+    // The issue asks for 1 mm; the two paths differ only by f32 rounding of the conversions
+    // (quaternion, deg/s, world velocity): 1.2e-8 m measured, so fail well before 1 mm.
+    assert!(
+        max_diff_m < 1e-6,
+        "C path drifts {max_diff_m} m from native"
+    );
+    let rmse = eval::Report::from_log(&c_log, None)
+        .rmse_pos_window_m
+        .unwrap();
+    assert!(rmse < 0.01, "the C path tracks paper-spiral: RMSE {rmse} m");
+    // The estimate the logs show is the native controller's.
+    let a_native = native.inner().estimate();
+    let a_c = c.shim.estimate();
+    for (x, y) in a_native.iter().zip(a_c.iter()) {
+        assert!(
+            (x - y).abs() < 1e-3 * (1.0 + x.abs()),
+            "a: native {a_native:?}, C {a_c:?}"
+        );
+    }
+    assert!(c.shim.log_u32("cycles") > 0, "the step cost is logged");
+    assert_eq!(c.shim.log_u8("phase"), 2, "airborne");
+}
+
+/// Flies the plant at 1 kHz with `setpoint(shim, t)` choosing the setpoint each tick.
+fn fly_shim(
+    shim: &mut Shim,
+    plant: &mut Plant,
+    seconds: f64,
+    mut setpoint: impl FnMut(&mut Shim, f64),
+) {
+    let dt = 1e-3;
+    let n = (seconds / dt).round() as u64;
+    let t0 = plant.t_s();
+    for k in 0..n {
+        let t = t0 + k as f64 * dt;
+        let s = *plant.state();
+        assert!(s.is_finite() && s.p_m.z > 0.0, "flying at t = {t} s: {s:?}");
+        shim.set_state(&s);
+        setpoint(shim, t);
+        let cmd = plant.params.clamp_rpm(rpm_of(shim.tick()));
+        plant.step(cmd, dt);
+    }
+}
+
+#[test]
+fn velocity_setpoints_fly_in_the_world_and_in_the_body_frame() {
+    let sc = scenario("hover");
+    let mut plant = sc.plant();
+    let start = plant.state().p_m;
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    shim.set_param_f32("airHeight", 0.0);
+    let vel = [VELOCITY, VELOCITY, ABS, ABS];
+    let z = start.z as f32;
+
+    // World frame: 0.3 m/s along x for 3 s, then stop and hold for 2 s.
+    fly_shim(&mut shim, &mut plant, 3.0, |s, _| {
+        s.set_setpoint(vel, [0.0, 0.0, z], [0.3, 0.0, 0.0], 0.0, 0.0, 0.0, false)
+    });
+    fly_shim(&mut shim, &mut plant, 2.0, |s, _| {
+        s.set_setpoint(vel, [0.0, 0.0, z], [0.0; 3], 0.0, 0.0, 0.0, false)
+    });
+    let moved = plant.state().p_m - start;
+    println!("world-frame velocity: moved {moved:?} m");
+    assert!((moved.x - 0.9).abs() < 0.05, "0.3 m/s for 3 s: {moved:?}");
+    assert!(moved.y.abs() < 0.03 && moved.z.abs() < 0.03, "{moved:?}");
+
+    // Turn to yaw 90° with a yaw-rate setpoint (45°/s for 2 s), holding position.
+    let turn = [VELOCITY, VELOCITY, ABS, VELOCITY];
+    fly_shim(&mut shim, &mut plant, 2.0, |s, _| {
+        s.set_setpoint(turn, [0.0, 0.0, z], [0.0; 3], 0.0, 45.0, 0.0, false)
+    });
+    fly_shim(&mut shim, &mut plant, 1.0, |s, _| {
+        s.set_setpoint(turn, [0.0, 0.0, z], [0.0; 3], 0.0, 0.0, 0.0, false)
+    });
+    let yaw_deg = plant.state().rpy().z.to_degrees();
+    assert!((yaw_deg - 90.0).abs() < 3.0, "yaw {yaw_deg}°");
+
+    // Body frame (cflib's hover setpoint): forward at 0.3 m/s is world +y now.
+    let before = plant.state().p_m;
+    fly_shim(&mut shim, &mut plant, 2.0, |s, _| {
+        s.set_setpoint(turn, [0.0, 0.0, z], [0.3, 0.0, 0.0], 0.0, 0.0, 0.0, true)
+    });
+    fly_shim(&mut shim, &mut plant, 2.0, |s, _| {
+        s.set_setpoint(turn, [0.0, 0.0, z], [0.0; 3], 0.0, 0.0, 0.0, true)
+    });
+    let moved = plant.state().p_m - before;
+    println!("body-frame velocity at yaw 90°: moved {moved:?} m");
+    assert!(
+        (moved.y - 0.6).abs() < 0.05,
+        "forward is +y at yaw 90°: {moved:?}"
+    );
+    assert!(moved.x.abs() < 0.05 && moved.z.abs() < 0.03, "{moved:?}");
+}
+
+#[test]
+fn velocity_reference_stays_on_the_leash() {
+    // A vehicle that cannot follow (its state is held fixed) must not see its reference run
+    // away: the integrated reference stays within `leash` of the estimate.
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let s = PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0);
+    shim.set_state(&s);
+    let leash = shim.param_f32("leash");
+    for _ in 0..3000 {
+        shim.set_setpoint(
+            [VELOCITY, VELOCITY, ABS, ABS],
+            [0.0, 0.0, 0.5],
+            [1.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            false,
+        );
+        shim.tick();
+    }
+    // The thrust tilts forward as much as a `leash` position error asks, no more: compare with
+    // the native controller at exactly that error.
+    let w = shim.tick();
+    let mut native = hamflight::FlightController::new(&MODEL, Gains::default());
+    let mut sp = hamflight::Setpoint::hover(Vector3::new(leash, 0.0, 0.5), 0.0);
+    sp.v_m_s.x = 1.0;
+    native.gains.adapt = false;
+    let o = native.step(&(&s).into(), &sp, 0.002);
+    assert!(
+        (w[2] - o.wrench.torque_nm.y).abs() < 0.05 * o.wrench.torque_nm.y.abs(),
+        "pitch torque {} vs native at the leash {}",
+        w[2],
+        o.wrench.torque_nm.y
+    );
+}
+
+#[test]
+fn flight_phases_zero_output_ground_freeze_and_reset_after_landing() {
+    let mut shim = Shim::new();
+    let ground = PlantState::at_rest(Vector3::new(0.2, -0.1, 0.0), 0.0);
+    let hover_sp =
+        |s: &mut Shim| s.set_setpoint([ABS; 4], [0.2, -0.1, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+    shim.set_state(&ground);
+    hover_sp(&mut shim);
+
+    // The supervisor cannot fly (not armed): zero output.
+    for _ in 0..10 {
+        assert_eq!(shim.tick(), [0.0; 4]);
+    }
+    assert_eq!(shim.log_u8("phase"), 0);
+
+    // Armed, motors spinning (the supervisor says flying), still on the ground: the output is
+    // live, the adaptation frozen at a = 0 however large the error.
+    shim.supervisor(true, true);
+    for _ in 0..1000 {
+        shim.set_state(&ground);
+        let w = shim.tick();
+        assert!(w[0] > 0.0, "thrust builds up on the ground");
+    }
+    assert_eq!(shim.log_u8("phase"), 1, "ground");
+    assert_eq!(shim.estimate(), [0.0; 6], "frozen on the ground");
+
+    // Lifted 3 cm (below the 5 cm of `airHeight`): still frozen.
+    let mut low = ground;
+    low.p_m.z = 0.03;
+    for _ in 0..200 {
+        shim.set_state(&low);
+        shim.tick();
+    }
+    assert_eq!(shim.estimate(), [0.0; 6], "frozen below airHeight");
+
+    // Airborne at 10 cm: the adaptation runs.
+    let mut up = ground;
+    up.p_m.z = 0.1;
+    for _ in 0..200 {
+        shim.set_state(&up);
+        shim.tick();
+    }
+    assert_eq!(shim.log_u8("phase"), 2, "airborne");
+    let a = shim.estimate();
+    assert!(a.iter().any(|v| *v != 0.0), "adapting in the air: {a:?}");
+
+    // Adaptation off by parameter: frozen (not reset); on again: it moves.
+    shim.set_param_u8("adapt", 0);
+    for _ in 0..100 {
+        shim.tick();
+    }
+    assert_eq!(shim.estimate(), a, "frozen by the adapt parameter");
+    shim.set_param_u8("adapt", 1);
+    // The reset parameter clears a once and clears itself.
+    shim.set_param_u8("reset", 1);
+    shim.tick();
+    shim.tick();
+    assert_eq!(shim.param_u8("reset"), 0);
+
+    // Landed: the supervisor no longer says flying. a resets and stays frozen.
+    for _ in 0..100 {
+        shim.tick();
+    }
+    assert!(shim.estimate().iter().any(|v| *v != 0.0));
+    shim.supervisor(true, false);
+    shim.set_state(&ground);
+    for _ in 0..100 {
+        shim.tick();
+    }
+    assert_eq!(shim.log_u8("phase"), 1, "back on the ground");
+    assert_eq!(shim.estimate(), [0.0; 6], "reset after landing");
+
+    // A zero-thrust attitude setpoint (cflib's send_setpoint(0, 0, 0, 0)) and the commander's
+    // null setpoint: zero output.
+    shim.supervisor(true, true);
+    shim.set_setpoint(
+        [DISABLE, DISABLE, DISABLE, ABS],
+        [0.0; 3],
+        [0.0; 3],
+        0.0,
+        0.0,
+        0.0,
+        false,
+    );
+    for _ in 0..10 {
+        assert_eq!(shim.tick(), [0.0; 4]);
+    }
+    assert_eq!(shim.log_u8("phase"), 0);
+    hover_sp(&mut shim);
+    assert!(shim.tick()[0] > 0.0, "engages again");
+    shim.set_null_setpoint();
+    for _ in 0..10 {
+        assert_eq!(shim.tick(), [0.0; 4]);
+    }
+    assert_eq!(
+        shim.log_f32("thrust"),
+        0.0,
+        "the logged wrench is the output"
+    );
+}
+
+#[test]
+fn runs_at_500_hz_on_even_ticks_and_refuses_bad_gains() {
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let s = PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0);
+    shim.set_state(&s);
+    shim.set_setpoint([ABS; 4], [0.1, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+    let w0 = shim.tick(); // tick 0: executes
+    assert!(w0[0] > 0.0);
+    // Tick 1 does not execute: control_t keeps its value even when the setpoint changes.
+    shim.set_setpoint([ABS; 4], [-0.1, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+    assert_eq!(shim.tick(), w0);
+    assert_ne!(shim.tick(), w0, "tick 2 executes");
+
+    // A negative gain written by the client is refused and the parameter reverts.
+    let kp = shim.param_f32("kp");
+    shim.set_param_f32("kp", -1.0);
+    shim.tick();
+    shim.tick();
+    assert_eq!(shim.param_f32("kp"), kp);
+    // A good one is taken: a stiffer k_p pushes harder towards the same setpoint.
+    shim.tick(); // 5
+    let before = shim.tick(); // 6 executes
+    shim.set_param_f32("kp", 2.0 * kp);
+    shim.tick(); // 7
+    let after = shim.tick(); // 8 executes
+    assert!(after[2].abs() > before[2].abs(), "{before:?} -> {after:?}");
+}
+
+#[test]
+fn absolute_yaw_setpoints_are_in_degrees() {
+    let sc = scenario("hover");
+    let mut plant = sc.plant();
+    let p = plant.state().p_m.cast::<f32>();
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    fly_shim(&mut shim, &mut plant, 3.0, |s, _| {
+        s.set_setpoint([ABS; 4], p.into(), [0.0; 3], 45.0, 0.0, 0.0, false)
+    });
+    let yaw_deg = plant.state().rpy().z.to_degrees();
+    assert!(
+        (yaw_deg - 45.0).abs() < 1.0,
+        "yaw {yaw_deg}° for a 45° setpoint"
+    );
+    let drift = (plant.state().p_m.cast::<f32>() - p).norm();
+    // 1.4 cm measured 3 s after the 45° step.
+    assert!(drift < 0.03, "holds position while turning: {drift} m");
+}
+
+#[test]
+fn a_degenerate_quaternion_is_a_state_fault_with_zero_output() {
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let zero_q = [0.0f32; 4];
+    let v = [0.0f32; 3];
+    let p = [0.0f32, 0.0, 0.5];
+    // SAFETY: arrays of three (four) floats; exclusive.
+    unsafe {
+        hf_host_set_state(
+            p.as_ptr(),
+            zero_q.as_ptr(),
+            v.as_ptr(),
+            v.as_ptr(),
+            v.as_ptr(),
+        )
+    };
+    shim.set_setpoint([ABS; 4], p, [0.0; 3], 0.0, 0.0, 0.0, false);
+    assert_eq!(shim.tick(), [0.0; 4]);
+    let faults = shim.log_u32("faults");
+    assert_eq!(faults & 0x1F, 1, "HF_FAULT_BAD_STATE only: {faults:#x}");
+}
+
+/// Un-stalls the worker when dropped, so a failing test cannot hang the others.
+struct Stall;
+
+impl Stall {
+    fn on() -> Self {
+        // SAFETY: the flag is the harness's own, behind a mutex.
+        unsafe { hf_host_stall_worker(true) };
+        Stall
+    }
+}
+
+impl Drop for Stall {
+    fn drop(&mut self) {
+        // SAFETY: as above.
+        unsafe { hf_host_stall_worker(false) };
+    }
+}
+
+#[test]
+fn a_late_step_gives_zero_output_until_the_worker_is_back() {
+    let mut shim = Shim::new();
+    shim.supervisor(true, true);
+    let s = PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0);
+    shim.set_state(&s);
+    shim.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
+    assert!(shim.tick()[0] > 0.0, "tick 0 flies");
+    shim.tick();
+
+    // The worker hangs after its step: the stabilizer gives up after 2 ticks (host ticks of
+    // 200 ms) and outputs zero.
+    let stall = Stall::on();
+    let t0 = Instant::now();
+    assert_eq!(shim.tick(), [0.0; 4], "tick 2: the step came back too late");
+    assert!(
+        t0.elapsed() >= Duration::from_millis(350),
+        "waited for the timeout"
+    );
+    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+    shim.tick();
+    // Tick 4 hands over a step the hung worker cannot take: another timeout. From then on the
+    // worker owns the controller and the stabilizer does not wait any more.
+    assert_eq!(shim.tick(), [0.0; 4]);
+    let t1 = Instant::now();
+    assert_eq!(shim.tick(), [0.0; 4], "tick 5");
+    assert!(
+        t1.elapsed() < Duration::from_millis(100),
+        "no wait while the worker is busy"
+    );
+    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+
+    // Back: the next executed tick flies again.
+    drop(stall);
+    std::thread::sleep(Duration::from_millis(20));
+    let w = shim.tick();
+    assert!(w[0] > 0.0, "tick 6 flies again: {w:?}");
+    assert_eq!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+}
