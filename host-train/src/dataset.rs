@@ -66,7 +66,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::baselines::DslPid;
 use crate::controller::{Controller, TrajectoryPoint};
-use crate::eval::{write_atomic, write_json_atomic};
+use crate::fsutil::{write_atomic, write_json_atomic};
 use crate::plant::{rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams};
 
 /// The format tag in `manifest.json`.

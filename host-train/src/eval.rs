@@ -31,47 +31,14 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::controller::Controller;
+pub use crate::flightlog::FlightLog;
+pub use crate::fsutil::{write_atomic, write_json_atomic};
 use crate::scenario::Scenario;
 
 /// Position error (m) above which a flight counts as crashed.
 pub const CRASH_ERR_M: f64 = 1.0;
 /// Start of the scoring window (s): RMSE after the adaptation transient.
 pub const WINDOW_START_S: f64 = 5.0;
-
-/// Everything logged during one flight, one entry per control tick.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct FlightLog {
-    /// Scenario name.
-    pub scenario: String,
-    /// Controller name.
-    pub controller: String,
-    /// Tick times (s).
-    pub t_s: Vec<f64>,
-    /// Flown (true) position (m, world).
-    pub p_m: Vec<[f64; 3]>,
-    /// Desired position (m, world).
-    pub p_ref_m: Vec<[f64; 3]>,
-    /// Position error |p − p*| (m).
-    pub err_m: Vec<f64>,
-    /// Rotor commands issued at each tick (rpm); the last tick may repeat the previous command.
-    pub rpm: Vec<[f64; 4]>,
-    /// Adaptation estimate at each tick (empty vectors if the controller does not adapt).
-    pub adaptation: Vec<Vec<f64>>,
-    /// Time of the crash (s), if any.
-    pub crash_time_s: Option<f64>,
-    /// Planned duration (s).
-    pub planned_duration_s: f64,
-    /// Control rate (Hz).
-    pub control_hz: f64,
-    /// Effective physics rate (Hz).
-    pub physics_hz: f64,
-    /// Wall time of the whole flight (s).
-    pub wall_s: f64,
-    /// Total wall time spent inside `Controller::step` (s).
-    pub control_wall_s: f64,
-    /// Number of controller steps.
-    pub control_steps: u64,
-}
 
 /// Fly `scenario` with `ctrl` (which is reset first). Stops early on a crash.
 pub fn fly(scenario: &Scenario, ctrl: &mut dyn Controller) -> FlightLog {
@@ -231,24 +198,6 @@ impl Report {
             },
         }
     }
-}
-
-/// Write `value` as pretty JSON to `path` through a temporary file and a rename.
-pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value).context("cannot serialize JSON")?;
-    write_atomic(path, text.as_bytes())
-}
-
-/// Write bytes to `path` through `path.tmp` and a rename, so no partial file is left behind.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write `{}`", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot rename `{}` to `{}`", tmp.display(), path.display())
-    })
 }
 
 /// Arguments of `host-train eval`.

@@ -9,6 +9,8 @@
 //! - [`scenario`]: TOML scenario files;
 //! - [`dataset`]: `collect` (paper Sec. 4) and the dataset format with its loader;
 //! - [`eval`]: closed-loop flights, `report.json`;
+//! - [`flightlog`]: the per-tick log of one flight;
+//! - [`fsutil`]: atomic file writing;
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
 //! - [`bridge`]: the JSON-lines bridge for external simulators;
@@ -22,6 +24,8 @@ pub mod dataset;
 pub mod demo;
 pub mod eval;
 pub mod flight;
+pub mod flightlog;
+pub mod fsutil;
 pub mod plant;
 pub mod plot;
 pub mod scenario;

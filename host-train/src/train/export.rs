@@ -6,7 +6,7 @@
 use super::data::{Windows, WINDOW_LEN};
 use super::r#loop::{EpochStats, Trained};
 use super::TrainConfig;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use hamflight::lie;
 use hamflight::model::{
     rk4_step, true_input_gain, HamiltonianModel, LearnedModel, ModelWeights, NominalModel, State,
@@ -14,8 +14,9 @@ use hamflight::model::{
 };
 use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
-use std::io::Write;
 use std::path::Path;
+
+pub use crate::fsutil::write_atomic;
 
 /// Root-mean-square prediction errors at each predicted step of the held-out windows.
 #[derive(Clone, Debug, Serialize)]
@@ -190,36 +191,6 @@ pub fn report(
         true_gain: std::array::from_fn(|r| std::array::from_fn(|c| tg[(r, c)])),
         realizations,
     }
-}
-
-/// Writes `bytes` to `path` whole: a temporary file in the same directory, then a rename.
-///
-/// # Errors
-/// Any I/O failure, naming the file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "weights".into());
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| -> Result<()> {
-        let mut f =
-            std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-        f.write_all(bytes)
-            .with_context(|| format!("writing {}", tmp.display()))?;
-        f.sync_all().ok();
-        std::fs::rename(&tmp, path)
-            .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 /// Writes the blob to `out` and the report to `out.json` (appending `.json` to the file name).
