@@ -216,6 +216,10 @@ pub struct EvalArgs {
     /// Output directory for report.json, path.svg and error.svg (created if missing).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Also write the flight as a Bitcraze uSD-card deck log (version 2, the variables of
+    /// tools/usd/config.txt at the control rate; see `usdrecord`), for `host-train import`.
+    #[arg(long, value_name = "FILE")]
+    pub log_usd: Option<PathBuf>,
 }
 
 /// Run `host-train eval`: fly, write `report.json`, `path.svg`, `error.svg`; return the report.
@@ -235,7 +239,16 @@ pub fn run(args: &EvalArgs) -> Result<Report> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     pb.set_message(format!("{} / {}", scenario.name, name));
-    let log = fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb));
+    let log = match &args.log_usd {
+        Some(path) => {
+            let params = scenario.plant().params.clone();
+            let mut rec = crate::usdrecord::UsdRecorder::new(ctrl.as_mut(), params);
+            let log = fly_with_progress(&scenario, &mut rec, Some(&pb));
+            rec.write(path)?;
+            log
+        }
+        None => fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb)),
+    };
     pb.finish_and_clear();
     let report = Report::from_log(&log, Some(&args.scenario));
     write_json_atomic(&args.out.join("report.json"), &report)?;
