@@ -467,3 +467,41 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
     assert!(r.realizations[0].true_wind_m_s2.is_none());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[derive(clap::Parser)]
+struct EvalCli {
+    #[command(flatten)]
+    eval: host_train::eval::EvalArgs,
+}
+
+#[test]
+fn eval_log_usd_writes_a_log_that_imports() {
+    use clap::Parser;
+    let dir = tmpdir("cli");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/hover.toml");
+    let log = dir.join("hover.bin");
+    let cli = EvalCli::parse_from([
+        "eval".as_ref(),
+        "--scenario".as_ref(),
+        scenario.as_os_str(),
+        "--controller".as_ref(),
+        "geometric".as_ref(),
+        "--out".as_ref(),
+        dir.join("eval").as_os_str(),
+        "--log-usd".as_ref(),
+        log.as_os_str(),
+    ] as [&std::ffi::OsStr; 9]);
+    let report = host_train::eval::run(&cli.eval).unwrap();
+    assert!(!report.crashed);
+    let bytes = std::fs::read(&log).unwrap();
+    let (l, rep) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
+    assert!(rep.crc_ok);
+    // 10 s at 500 Hz: one event per controller step.
+    assert_eq!(l.events.len(), 5000);
+    let mut a = args(&dir.join("data"));
+    a.logs = vec![log];
+    let files = import::run(&a).unwrap();
+    assert_eq!(files[0].samples_in, 5000);
+    assert_eq!(files[0].samples_kept, 4500);
+    std::fs::remove_dir_all(&dir).ok();
+}
