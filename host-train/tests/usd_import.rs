@@ -505,3 +505,33 @@ fn eval_log_usd_writes_a_log_that_imports() {
     assert_eq!(files[0].samples_kept, 4500);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn version_1_logs_have_millisecond_timestamps() {
+    let mut b = vec![0xBC];
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&FIXED_FREQUENCY_ID.to_le_bytes());
+    b.extend_from_slice(b"fixedFrequency\0");
+    b.extend_from_slice(&2u16.to_le_bytes());
+    b.extend_from_slice(b"a.x(f)\0a.n(h)\0");
+    for k in 0..3u32 {
+        b.extend_from_slice(&FIXED_FREQUENCY_ID.to_le_bytes());
+        b.extend_from_slice(&(10 * k).to_le_bytes());
+        b.extend_from_slice(&(k as f32 + 0.25).to_le_bytes());
+        b.extend_from_slice(&(-7i16).to_le_bytes());
+    }
+    b.extend_from_slice(&crc32(&b).to_le_bytes());
+    let (log, rep) = usdlog::parse(&b, ParseOptions::default()).unwrap();
+    assert!(rep.crc_ok);
+    assert_eq!(log.version, 1);
+    let ts: Vec<u64> = log.events.iter().map(|e| e.timestamp_us).collect();
+    assert_eq!(ts, vec![0, 10_000, 20_000]);
+    assert_eq!(log.events[2].values, vec![2.25, -7.0]);
+    // Version 3 is refused by name.
+    b[1] = 3;
+    assert_eq!(
+        usdlog::parse(&b, ParseOptions::default()).unwrap_err(),
+        UsdError::UnsupportedVersion { version: 3 }
+    );
+}
