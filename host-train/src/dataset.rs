@@ -453,9 +453,9 @@ fn load_csv(path: &Path) -> Result<Vec<Flight>> {
         };
         let ln = i + 2;
         let s = from_row(&row).with_context(|| format!("`{}` line {ln}", path.display()))?;
-        if row.flight + 1 == flights.len() + 1 {
+        if row.flight == flights.len() {
             flights.push(Flight::default());
-        } else if row.flight + 1 != flights.len() {
+        } else if Some(row.flight) != flights.len().checked_sub(1) {
             bail!(
                 "`{}` line {ln}: flight {} out of order (expected {} or {})",
                 path.display(),
@@ -537,14 +537,14 @@ pub fn windows(ds: &Dataset, spec: WindowSpec) -> Result<Vec<WindowAt>> {
     for (j, r) in ds.realizations.iter().enumerate() {
         for (f, flight) in r.flights.iter().enumerate() {
             for seg in segments(&flight.samples, ds.manifest.sample_hz) {
-                let mut s = seg.start;
-                while s + spec.len <= seg.end {
+                let mut s = Some(seg.start);
+                while let Some(start) = s.filter(|s| s.saturating_add(spec.len) <= seg.end) {
                     out.push(WindowAt {
                         realization: j,
                         flight: f,
-                        start: s,
+                        start,
                     });
-                    s += spec.stride;
+                    s = start.checked_add(spec.stride);
                 }
             }
         }
