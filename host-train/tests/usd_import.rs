@@ -535,3 +535,55 @@ fn version_1_logs_have_millisecond_timestamps() {
         UsdError::UnsupportedVersion { version: 3 }
     );
 }
+
+#[test]
+fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
+    use host_train::dataset::Sample;
+    use host_train::PlantState;
+    // 500 Hz: 1 s on the ground (z = 0, motors idle), 3 s airborne at 0.5 m with hover thrust,
+    // a 50 ms gap at t = 2.5 s, then 1 s landed again with the motors still spinning (thrust
+    // above the rule's fraction, but z below the minimum height).
+    let hover_n = 0.027 * 9.8;
+    let mut samples = Vec::new();
+    for k in 0..2500u32 {
+        let t = f64::from(k) * 0.002;
+        if (2.5..2.55).contains(&t) {
+            continue;
+        }
+        let air = (1.0..4.0).contains(&t);
+        let mut state = PlantState::default();
+        state.p_m.z = if air { 0.5 } else { 0.0 };
+        samples.push(Sample {
+            t_s: t,
+            state,
+            wrench: [if t < 1.0 { 0.0 } else { hover_n }, 0.0, 0.0, 0.0],
+            rpm: None,
+            acc_body_m_s2: None,
+        });
+    }
+    let a = args(Path::new("unused"));
+    let flights = import::airborne_flights(&samples, 500.0, &a);
+    let spans: Vec<(f64, f64, usize)> = flights
+        .iter()
+        .map(|f| {
+            let s = &f.samples;
+            (s[0].t_s, s[s.len() - 1].t_s, s.len())
+        })
+        .collect();
+    // Airborne 1.0–2.498 s and 2.55–3.998 s; 0.5 s off each end of each stretch.
+    assert_eq!(spans.len(), 2, "{spans:?}");
+    assert!((spans[0].0 - 1.5).abs() < 1e-9 && (spans[0].1 - 1.998).abs() < 1e-9);
+    assert!((spans[1].0 - 3.05).abs() < 1e-9 && (spans[1].1 - 3.498).abs() < 1e-9);
+    assert_eq!(spans[0].2, 250);
+    assert!(flights
+        .iter()
+        .flat_map(|f| &f.samples)
+        .all(|s| s.state.p_m.z >= 0.1 && s.wrench[0] > 0.0));
+    // Without trimming, the stretches are the airborne samples themselves.
+    let untrimmed = ImportArgs { trim_s: 0.0, ..a };
+    let n: usize = import::airborne_flights(&samples, 500.0, &untrimmed)
+        .iter()
+        .map(|f| f.samples.len())
+        .sum();
+    assert_eq!(n, 1500 - 25);
+}
