@@ -52,6 +52,18 @@ pub fn write_dataset<M: HamiltonianModel>(
     windows: usize,
     seed: u64,
 ) {
+    write_dataset_with(dir, model, a, windows, seed, false);
+}
+
+/// [`write_dataset`], with a new random command at every step if `per_step`.
+pub fn write_dataset_with<M: HamiltonianModel>(
+    dir: &Path,
+    model: &M,
+    a: &[[f32; FEATURES]],
+    windows: usize,
+    seed: u64,
+    per_step: bool,
+) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let dt = 1.0 / 240.0;
     let mut ds = Dataset::new(
@@ -65,9 +77,12 @@ pub fn write_dataset<M: HamiltonianModel>(
         let mut flights = Vec::with_capacity(windows);
         for _ in 0..windows {
             let mut s = random_state(&mut rng, 0.3);
-            let u = random_control(&mut rng);
+            let mut u = random_control(&mut rng);
             let mut samples = Vec::with_capacity(5);
             for step in 0..5 {
+                if per_step && step > 0 {
+                    u = random_control(&mut rng);
+                }
                 samples.push(Sample {
                     t_s: f64::from(step) / 240.0,
                     state: PlantState {
