@@ -2,7 +2,7 @@
 //! trains the Hamiltonian model, flies paper-spiral with every controller and writes
 //! `report.json`, figures like the paper's Fig. 2 and a table.
 
-use crate::dataset::{self, CollectConfig};
+use crate::collect::{self, CollectConfig};
 use crate::eval::{self, FlightLog, Report};
 use crate::{flight, plot, train, Scenario};
 use anyhow::{Context, Result};
@@ -120,10 +120,10 @@ pub fn run(args: &DemoArgs) -> Result<DemoReport> {
                 seed: args.seed,
                 ..CollectConfig::default()
             };
-            let manifest = dataset::collect(&data, &cfg)?;
-            let windows: usize = manifest.realizations.iter().map(|r| r.windows).sum();
+            let manifest = collect::collect(&data, &cfg)?;
+            let samples: usize = manifest.realizations.iter().map(|r| r.samples).sum();
             eprintln!(
-                "      {} realizations, {windows} windows in {:.1} s",
+                "      {} realizations, {samples} samples in {:.1} s",
                 manifest.realizations.len(),
                 t0.elapsed().as_secs_f64()
             );

@@ -31,47 +31,14 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::controller::Controller;
+pub use crate::flightlog::FlightLog;
+pub use crate::fsutil::{write_atomic, write_json_atomic};
 use crate::scenario::Scenario;
 
 /// Position error (m) above which a flight counts as crashed.
 pub const CRASH_ERR_M: f64 = 1.0;
 /// Start of the scoring window (s): RMSE after the adaptation transient.
 pub const WINDOW_START_S: f64 = 5.0;
-
-/// Everything logged during one flight, one entry per control tick.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct FlightLog {
-    /// Scenario name.
-    pub scenario: String,
-    /// Controller name.
-    pub controller: String,
-    /// Tick times (s).
-    pub t_s: Vec<f64>,
-    /// Flown (true) position (m, world).
-    pub p_m: Vec<[f64; 3]>,
-    /// Desired position (m, world).
-    pub p_ref_m: Vec<[f64; 3]>,
-    /// Position error |p − p*| (m).
-    pub err_m: Vec<f64>,
-    /// Rotor commands issued at each tick (rpm); the last tick may repeat the previous command.
-    pub rpm: Vec<[f64; 4]>,
-    /// Adaptation estimate at each tick (empty vectors if the controller does not adapt).
-    pub adaptation: Vec<Vec<f64>>,
-    /// Time of the crash (s), if any.
-    pub crash_time_s: Option<f64>,
-    /// Planned duration (s).
-    pub planned_duration_s: f64,
-    /// Control rate (Hz).
-    pub control_hz: f64,
-    /// Effective physics rate (Hz).
-    pub physics_hz: f64,
-    /// Wall time of the whole flight (s).
-    pub wall_s: f64,
-    /// Total wall time spent inside `Controller::step` (s).
-    pub control_wall_s: f64,
-    /// Number of controller steps.
-    pub control_steps: u64,
-}
 
 /// Fly `scenario` with `ctrl` (which is reset first). Stops early on a crash.
 pub fn fly(scenario: &Scenario, ctrl: &mut dyn Controller) -> FlightLog {
@@ -233,24 +200,6 @@ impl Report {
     }
 }
 
-/// Write `value` as pretty JSON to `path` through a temporary file and a rename.
-pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value).context("cannot serialize JSON")?;
-    write_atomic(path, text.as_bytes())
-}
-
-/// Write bytes to `path` through `path.tmp` and a rename, so no partial file is left behind.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write `{}`", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot rename `{}` to `{}`", tmp.display(), path.display())
-    })
-}
-
 /// Arguments of `host-train eval`.
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
@@ -267,6 +216,10 @@ pub struct EvalArgs {
     /// Output directory for report.json, path.svg and error.svg (created if missing).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Also write the flight as a Bitcraze uSD-card deck log (version 2, the variables of
+    /// tools/usd/config.txt at the control rate; see `usdrecord`), for `host-train import`.
+    #[arg(long, value_name = "FILE")]
+    pub log_usd: Option<PathBuf>,
 }
 
 /// Run `host-train eval`: fly, write `report.json`, `path.svg`, `error.svg`; return the report.
@@ -286,7 +239,16 @@ pub fn run(args: &EvalArgs) -> Result<Report> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     pb.set_message(format!("{} / {}", scenario.name, name));
-    let log = fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb));
+    let log = match &args.log_usd {
+        Some(path) => {
+            let params = scenario.plant().params.clone();
+            let mut rec = crate::usdrecord::UsdRecorder::new(ctrl.as_mut(), params);
+            let log = fly_with_progress(&scenario, &mut rec, Some(&pb));
+            rec.write(path)?;
+            log
+        }
+        None => fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb)),
+    };
     pb.finish_and_clear();
     let report = Report::from_log(&log, Some(&args.scenario));
     write_json_atomic(&args.out.join("report.json"), &report)?;

@@ -7,8 +7,14 @@
 //! - [`controller`]: the [`controller::Controller`] trait and [`controller::TrajectoryPoint`];
 //! - [`baselines`]: the DSL PID and the geometric controller, and [`baselines::by_name`];
 //! - [`scenario`]: TOML scenario files;
-//! - [`dataset`]: `collect` (paper Sec. 4) and the dataset format with its loader;
+//! - [`collect`]: `host-train collect`, training data as in the paper's Sec. 4;
+//! - [`dataset`]: the dataset format (the one reader and writer) and the training windows;
+//! - [`import`]: `host-train import`, flight logs (uSD deck, CSV) to a dataset;
+//! - [`usdlog`]: the Bitcraze uSD-card deck log format (reader, version-2 writer);
+//! - [`usdrecord`]: a SITL flight recorded as a uSD log (`eval --log-usd`);
 //! - [`eval`]: closed-loop flights, `report.json`;
+//! - [`flightlog`]: the per-tick log of one flight;
+//! - [`fsutil`]: atomic file writing;
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
 //! - [`bridge`]: the JSON-lines bridge for external simulators;
@@ -17,15 +23,21 @@
 
 pub mod baselines;
 pub mod bridge;
+pub mod collect;
 pub mod controller;
 pub mod dataset;
 pub mod demo;
 pub mod eval;
 pub mod flight;
+pub mod flightlog;
+pub mod fsutil;
+pub mod import;
 pub mod plant;
 pub mod plot;
 pub mod scenario;
 pub mod train;
+pub mod usdlog;
+pub mod usdrecord;
 
 pub use controller::{Controller, TrajectoryPoint};
 pub use plant::{Plant, PlantState, VehicleParams};

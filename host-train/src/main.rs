@@ -16,7 +16,10 @@ struct Cli {
 enum Command {
     /// Collect training data as in the paper's Sec. 4: the DSL PID flies to random poses under
     /// M disturbance realizations; writes DIR/manifest.json and DIR/realization_NN.csv.
-    Collect(host_train::dataset::CollectArgs),
+    Collect(host_train::collect::CollectArgs),
+    /// Import flight logs (Bitcraze uSD-card deck binary logs, or the documented CSV) into a
+    /// dataset for `train`: one realization per log, airborne flights only.
+    Import(host_train::import::ImportArgs),
     /// Learn the Hamiltonian model and disturbance features (paper Problem 1) from a dataset;
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
@@ -46,13 +49,45 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Collect(args) => {
             let t0 = std::time::Instant::now();
-            let m = host_train::dataset::run(&args)?;
-            let n: usize = m.realizations.iter().map(|r| r.windows).sum();
+            let m = host_train::collect::run(&args)?;
+            let n: usize = m.realizations.iter().map(|r| r.samples).sum();
             println!(
-                "wrote {} realizations, {n} windows to {} in {:.2} s",
+                "wrote {} realizations, {n} samples to {} in {:.2} s",
                 m.realizations.len(),
                 args.out.display(),
                 t0.elapsed().as_secs_f64()
+            );
+        }
+        Command::Import(args) => {
+            let files = host_train::import::run(&args)?;
+            for f in &files {
+                println!(
+                    "{}: {} samples, {} kept in {} flights{}{}{}",
+                    f.file,
+                    f.samples_in,
+                    f.samples_kept,
+                    f.flights,
+                    if f.skipped_events > 0 {
+                        format!(", {} events of other types skipped", f.skipped_events)
+                    } else {
+                        String::new()
+                    },
+                    if f.crc_ok {
+                        ""
+                    } else {
+                        ", CRC mismatch (decoded anyway)"
+                    },
+                    if f.disturbance_free {
+                        ", disturbance-free"
+                    } else {
+                        ""
+                    },
+                );
+            }
+            println!(
+                "wrote {} realizations to {}",
+                files.len(),
+                args.out.display()
             );
         }
         Command::Train(args) => {

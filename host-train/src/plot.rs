@@ -6,7 +6,8 @@ use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
-use crate::eval::{write_atomic, FlightLog};
+use crate::flightlog::FlightLog;
+use crate::fsutil::write_atomic;
 
 const PALETTE: [RGBColor; 6] = [
     RGBColor(31, 119, 180),

@@ -2,7 +2,7 @@
 //! Sec. 4, scaled down) lowers the held-out loss by a large factor. Run in release:
 //! `cargo test --release -p host-train --test train_collected`.
 
-use host_train::dataset::{CollectArgs, CollectConfig};
+use host_train::collect::{CollectArgs, CollectConfig};
 use host_train::train::{run, TrainConfig};
 
 #[test]
@@ -17,7 +17,7 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
             ..CollectConfig::default()
         },
     };
-    host_train::dataset::run(&args).expect("collect");
+    host_train::collect::run(&args).expect("collect");
     let cfg = TrainConfig {
         epochs: 15,
         batch: 64,

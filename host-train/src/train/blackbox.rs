@@ -11,7 +11,7 @@
 //! Held-out errors are those of [`super::export::prediction_errors`] at the last step, the
 //! predicted R first projected to the nearest rotation; ‖RᵀR − I‖ is reported alongside.
 
-use super::data::{self, Batch, StateBatch, Windows, WINDOW_LEN};
+use super::data::{self, Batch, StateBatch, Windows};
 use super::model::{to_vec, window_loss, TMlp};
 use super::r#loop::Adam;
 use super::TrainConfig;
@@ -81,7 +81,7 @@ fn derivative_stats(data: &Windows, ids: &[usize]) -> (Vec<f32>, Vec<f32>) {
     let mut n = 0f64;
     for &i in ids {
         let w = &data.windows[i];
-        for k in 0..WINDOW_LEN - 1 {
+        for k in 0..w.states.len() - 1 {
             let (a, b) = (&w.states[k], &w.states[k + 1]);
             let mut d = [0f64; OUT];
             for c in 0..3 {
@@ -139,16 +139,21 @@ struct BlackBox {
     out_std: Tensor<2>,
 }
 
-/// Inputs that stay constant through a window: [u / CONTROL_SCALE, one-hot j] [B, 4 + M].
-fn window_inputs(data: &Windows, ids: &[usize], device: &Device) -> Tensor<2> {
+/// Inputs that stay constant through each step of a window: [u_k / CONTROL_SCALE, one-hot j]
+/// [B, 4 + M], one tensor per step k.
+fn window_inputs(data: &Windows, ids: &[usize], device: &Device) -> Vec<Tensor<2>> {
     let m = data.realizations.len();
-    let mut x = Vec::with_capacity(ids.len() * (4 + m));
-    for &i in ids {
-        let w = &data.windows[i];
-        x.extend(w.u.iter().zip(CONTROL_SCALE.iter()).map(|(u, s)| u / s));
-        x.extend((0..m).map(|j| if j == w.realization { 1.0 } else { 0.0 }));
-    }
-    Tensor::from_data(TensorData::new(x, [ids.len(), 4 + m]), device)
+    (0..data.window_len - 1)
+        .map(|k| {
+            let mut x = Vec::with_capacity(ids.len() * (4 + m));
+            for &i in ids {
+                let w = &data.windows[i];
+                x.extend(w.u[k].iter().zip(CONTROL_SCALE.iter()).map(|(u, s)| u / s));
+                x.extend((0..m).map(|j| if j == w.realization { 1.0 } else { 0.0 }));
+            }
+            Tensor::from_data(TensorData::new(x, [ids.len(), 4 + m]), device)
+        })
+        .collect()
 }
 
 impl BlackBox {
@@ -188,8 +193,8 @@ impl BlackBox {
         }
     }
 
-    /// The predicted states x₁..x₄ of a batch.
-    fn rollout(&self, b: &Batch, fixed: &Tensor<2>, dt: f32) -> Vec<BState> {
+    /// The predicted states x₁..x_N of a batch, step k under `fixed[k]`.
+    fn rollout(&self, b: &Batch, fixed: &[Tensor<2>], dt: f32) -> Vec<BState> {
         let s0 = &b.states[0];
         let mut x = BState {
             p: s0.p.clone(),
@@ -197,9 +202,9 @@ impl BlackBox {
             v: s0.v.clone(),
             w: s0.w.clone(),
         };
-        let mut out = Vec::with_capacity(WINDOW_LEN - 1);
-        for _ in 1..WINDOW_LEN {
-            x = self.rk4(&x, fixed, dt);
+        let mut out = Vec::with_capacity(fixed.len());
+        for f in fixed {
+            x = self.rk4(&x, f, dt);
             out.push(x.clone());
         }
         out
@@ -207,7 +212,7 @@ impl BlackBox {
 
     /// The structured model's loss ([`super::r#loop::batch_loss`]): mean over windows of
     /// Σₙ ℓ_p + ℓ_R + vel_weight ℓ_v + ℓ_ω.
-    fn loss(&self, b: &Batch, fixed: &Tensor<2>, dt: f32, vel_weight: f32) -> Tensor<1> {
+    fn loss(&self, b: &Batch, fixed: &[Tensor<2>], dt: f32, vel_weight: f32) -> Tensor<1> {
         let preds = self.rollout(b, fixed, dt).into_iter().map(|x| StateBatch {
             p: x.p,
             rot: x.r.reshape([b.len, 3, 3]),
@@ -356,7 +361,9 @@ fn evaluate(
         let Some(x) = last else { continue };
         let (p, r, v, w) = (to_vec(&x.p), to_vec(&x.r), to_vec(&x.v), to_vec(&x.w));
         for (n, &i) in chunk.iter().enumerate() {
-            let t = &data.windows[i].states[WINDOW_LEN - 1];
+            let Some(t) = data.windows[i].states.last() else {
+                continue;
+            };
             let vec3 = |a: &[f32]| Vector3::from_fn(|k, _| f64::from(a[3 * n + k]));
             let rm = Matrix3::from_fn(|a, c| f64::from(r[9 * n + 3 * a + c]));
             let tr = t.rot.map(f64::from);
@@ -397,7 +404,7 @@ pub fn compare(data_dir: &Path, fractions: &[f64], epochs: usize) -> Result<Vec<
         seed: 0,
         ..TrainConfig::default()
     };
-    let windows = data::load(data_dir)?;
+    let windows = data::load(data_dir, cfg.window)?;
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
     let out_dir: PathBuf = std::env::temp_dir().join("hamflight-blackbox-compare");
     let mut rows = Vec::with_capacity(fractions.len());

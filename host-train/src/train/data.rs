@@ -1,50 +1,42 @@
-//! Training windows: the collected dataset (format `hamflight-dataset-v1`, see `dataset.rs`)
-//! read into fixed 5-state windows with their constant control and realization index, a
-//! deterministic held-out split, and the batch tensors the burn model consumes.
+//! Training windows: a dataset (format `hamflight-dataset-v2`, read by [`crate::dataset`]) cut
+//! into windows of `len` states every `stride` samples, each with the command of every step and
+//! its realization index, a deterministic held-out split, and the batch tensors the burn model
+//! consumes.
 
-use anyhow::{bail, Context, Result};
+use crate::dataset::{self, WindowSpec};
+use anyhow::{bail, Result};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::State;
-use nalgebra::{Matrix3, Vector3};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use serde::Deserialize;
 use std::path::Path;
 
-/// States per window (N + 1 in the paper's notation, N = 4 predicted states).
-pub const WINDOW_LEN: usize = 5;
-
-/// One window: states x₀..x₄ under a constant control u, from realization `realization`.
+/// One window: states x₀..x_N, the command u_k applied from x_k to x_{k+1}, and the
+/// realization j it comes from.
 #[derive(Clone, Debug)]
 pub struct Window {
-    /// The sampled states.
-    pub states: [State; WINDOW_LEN],
-    /// The control u = [f (N); τ (N·m)] held over the window.
-    pub u: [f32; 4],
+    /// The sampled states (`len` of them).
+    pub states: Vec<State>,
+    /// The control u_k = [f (N); τ (N·m)] of each step (`len − 1` of them).
+    pub u: Vec<[f32; 4]>,
     /// Index of the disturbance realization j.
     pub realization: usize,
 }
 
 /// The manifest's description of one realization (its true disturbance, for the report).
-#[derive(Clone, Debug, Deserialize, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct RealizationInfo {
     /// The CSV file, relative to the dataset directory.
     pub file: String,
-    /// The world-frame wind as a specific force (m/s²).
-    pub wind_m_s2: [f32; 3],
-    /// Per-rotor thrust efficiency δᵢ.
-    pub rotor_efficiency: [f32; 4],
+    /// The world-frame wind as a specific force (m/s²), when known.
+    pub wind_m_s2: Option<[f32; 3]>,
+    /// Per-rotor thrust efficiency δᵢ, when known.
+    pub rotor_efficiency: Option<[f32; 4]>,
+    /// Marked disturbance-free: its a_j is pinned to 0.
+    pub disturbance_free: bool,
     /// Number of windows.
     pub windows: usize,
-}
-
-#[derive(Clone, Debug, Deserialize)]
-struct Manifest {
-    format: String,
-    sample_hz: f32,
-    window_len: usize,
-    realizations: Vec<RealizationInfo>,
 }
 
 /// A loaded dataset.
@@ -54,121 +46,68 @@ pub struct Windows {
     pub windows: Vec<Window>,
     /// Sampling rate (Hz); the window's time step is 1 / sample_hz.
     pub sample_hz: f32,
+    /// States per window.
+    pub window_len: usize,
     /// The realizations' true disturbances, in index order.
     pub realizations: Vec<RealizationInfo>,
 }
 
-/// Reads `DIR/manifest.json` and every `realization_NN.csv` it lists.
+fn f32_state(s: &crate::plant::PlantState) -> State {
+    State {
+        p_m: s.p_m.cast(),
+        rot: s.rot.cast(),
+        v_body_m_s: s.v_body_m_s.cast(),
+        w_body_rad_s: s.w_body_rad_s.cast(),
+    }
+}
+
+/// Reads the dataset in `dir` and cuts it into `spec` windows ([`dataset::windows`]).
 ///
 /// # Errors
-/// Missing or malformed files, a format other than `hamflight-dataset-v1`, a window length
-/// other than 5, or non-finite values; the error names the file.
-pub fn load(dir: &Path) -> Result<Windows> {
-    let mpath = dir.join("manifest.json");
-    let text =
-        std::fs::read_to_string(&mpath).with_context(|| format!("reading {}", mpath.display()))?;
-    let manifest: Manifest =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", mpath.display()))?;
-    if manifest.format != "hamflight-dataset-v1" {
-        bail!(
-            "{}: unsupported format {:?}",
-            mpath.display(),
-            manifest.format
-        );
+/// The dataset's read errors (naming the file and line), a bad `spec`, or a realization that
+/// yields no window.
+pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
+    let ds = dataset::load(dir)?;
+    let at = dataset::windows(&ds, spec)?;
+    let mut windows = Vec::with_capacity(at.len());
+    let mut counts = vec![0usize; ds.realizations.len()];
+    for w in &at {
+        let samples = &ds.realizations[w.realization].flights[w.flight].samples;
+        let win = &samples[w.start..w.start + spec.len];
+        windows.push(Window {
+            states: win.iter().map(|s| f32_state(&s.state)).collect(),
+            u: win[..spec.len - 1]
+                .iter()
+                .map(|s| s.wrench.map(|x| x as f32))
+                .collect(),
+            realization: w.realization,
+        });
+        counts[w.realization] += 1;
     }
-    if manifest.window_len != WINDOW_LEN {
-        bail!(
-            "{}: window_len {} (expected {WINDOW_LEN})",
-            mpath.display(),
-            manifest.window_len
-        );
-    }
-    let mut windows = Vec::new();
-    for (j, r) in manifest.realizations.iter().enumerate() {
-        let path = dir.join(&r.file);
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let before = windows.len();
-        parse_csv(&text, j, &mut windows).with_context(|| format!("parsing {}", path.display()))?;
-        if windows.len() == before {
-            bail!("{}: no windows", path.display());
+    let mut realizations = Vec::with_capacity(ds.realizations.len());
+    for (r, &n) in ds.realizations.iter().zip(&counts) {
+        if n == 0 {
+            bail!(
+                "`{}`: no window of {} states at {} Hz (flights too short or not continuous)",
+                dir.join(&r.meta.file).display(),
+                spec.len,
+                ds.manifest.sample_hz
+            );
         }
+        realizations.push(RealizationInfo {
+            file: r.meta.file.clone(),
+            wind_m_s2: r.meta.wind_m_s2.map(|w| w.map(|x| x as f32)),
+            rotor_efficiency: r.meta.rotor_efficiency.map(|d| d.map(|x| x as f32)),
+            disturbance_free: r.meta.disturbance_free,
+            windows: n,
+        });
     }
     Ok(Windows {
         windows,
-        sample_hz: manifest.sample_hz,
-        realizations: manifest.realizations,
+        sample_hz: ds.manifest.sample_hz as f32,
+        window_len: spec.len,
+        realizations,
     })
-}
-
-fn parse_csv(text: &str, realization: usize, out: &mut Vec<Window>) -> Result<()> {
-    let mut lines = text.lines();
-    let header = lines.next().context("empty file")?;
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let col = |name: &str| {
-        cols.iter()
-            .position(|c| *c == name)
-            .with_context(|| format!("missing column {name}"))
-    };
-    let names = [
-        "window", "step", "px", "py", "pz", "r11", "r12", "r13", "r21", "r22", "r23", "r31", "r32",
-        "r33", "vx", "vy", "vz", "wx", "wy", "wz", "f_n", "tau_x_nm", "tau_y_nm", "tau_z_nm",
-    ];
-    let idx: Vec<usize> = names.iter().map(|n| col(n)).collect::<Result<_>>()?;
-    let mut cur: Vec<(State, [f32; 4])> = Vec::with_capacity(WINDOW_LEN);
-    let mut cur_window: Option<i64> = None;
-    for (ln, line) in lines.enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').collect();
-        let mut v = [0f64; 24];
-        for (slot, &i) in v.iter_mut().zip(idx.iter()) {
-            let f = fields
-                .get(i)
-                .with_context(|| format!("line {}: too few fields", ln + 2))?;
-            *slot = f
-                .trim()
-                .parse::<f64>()
-                .with_context(|| format!("line {}: bad number {f:?}", ln + 2))?;
-            if !slot.is_finite() {
-                bail!("line {}: non-finite value", ln + 2);
-            }
-        }
-        let w = v[0] as i64;
-        if cur_window != Some(w) {
-            if !cur.is_empty() {
-                bail!(
-                    "line {}: window {:?} has {} states",
-                    ln + 2,
-                    cur_window,
-                    cur.len()
-                );
-            }
-            cur_window = Some(w);
-        }
-        let f = |k: usize| v[k] as f32;
-        let state = State {
-            p_m: Vector3::new(f(2), f(3), f(4)),
-            rot: Matrix3::new(f(5), f(6), f(7), f(8), f(9), f(10), f(11), f(12), f(13)),
-            v_body_m_s: Vector3::new(f(14), f(15), f(16)),
-            w_body_rad_s: Vector3::new(f(17), f(18), f(19)),
-        };
-        cur.push((state, [f(20), f(21), f(22), f(23)]));
-        if cur.len() == WINDOW_LEN {
-            let states = std::array::from_fn(|n| cur[n].0);
-            out.push(Window {
-                states,
-                u: cur[0].1,
-                realization,
-            });
-            cur.clear();
-        }
-    }
-    if !cur.is_empty() {
-        bail!("last window is incomplete");
-    }
-    Ok(())
 }
 
 /// A deterministic split: `heldout_frac` of each realization's windows, chosen with `seed`,
@@ -205,10 +144,10 @@ pub struct StateBatch {
 /// A batch of windows as tensors.
 #[derive(Clone, Debug)]
 pub struct Batch {
-    /// x₀..x₄.
+    /// x₀..x_N.
     pub states: Vec<StateBatch>,
-    /// u [B,4].
-    pub u: Tensor<2>,
+    /// u_k [B,4] of each step k = 0..N−1.
+    pub u: Vec<Tensor<2>>,
     /// The realization index of each window [B].
     pub realization: Tensor<1, Int>,
     /// Batch size.
@@ -218,8 +157,9 @@ pub struct Batch {
 /// Builds the tensors of the windows `ids`.
 pub fn batch(data: &Windows, ids: &[usize], device: &Device) -> Batch {
     let b = ids.len();
-    let mut states = Vec::with_capacity(WINDOW_LEN);
-    for n in 0..WINDOW_LEN {
+    let len = data.window_len;
+    let mut states = Vec::with_capacity(len);
+    for n in 0..len {
         let (mut p, mut r, mut v, mut w) = (
             Vec::with_capacity(3 * b),
             Vec::with_capacity(9 * b),
@@ -240,14 +180,19 @@ pub fn batch(data: &Windows, ids: &[usize], device: &Device) -> Batch {
             w: Tensor::from_data(TensorData::new(w, [b, 3]), device),
         });
     }
-    let u: Vec<f32> = ids.iter().flat_map(|&i| data.windows[i].u).collect();
+    let u = (0..len - 1)
+        .map(|k| {
+            let u: Vec<f32> = ids.iter().flat_map(|&i| data.windows[i].u[k]).collect();
+            Tensor::from_data(TensorData::new(u, [b, 4]), device)
+        })
+        .collect();
     let j: Vec<i64> = ids
         .iter()
         .map(|&i| data.windows[i].realization as i64)
         .collect();
     Batch {
         states,
-        u: Tensor::from_data(TensorData::new(u, [b, 4]), device),
+        u,
         realization: Tensor::from_data(TensorData::new(j, [b]), device),
         len: b,
     }

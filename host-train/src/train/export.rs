@@ -3,10 +3,10 @@
 //! held-out N-step prediction errors of the learned and nominal models, the learned J (hover)
 //! and g against the true ones, and the a_j with the true disturbances of their realizations.
 
-use super::data::{Windows, WINDOW_LEN};
+use super::data::Windows;
 use super::r#loop::{EpochStats, Trained};
 use super::TrainConfig;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use hamflight::lie;
 use hamflight::model::{
     rk4_step, true_input_gain, HamiltonianModel, LearnedModel, ModelWeights, NominalModel, State,
@@ -14,8 +14,9 @@ use hamflight::model::{
 };
 use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
-use std::io::Write;
 use std::path::Path;
+
+pub use crate::fsutil::write_atomic;
 
 /// Root-mean-square prediction errors at each predicted step of the held-out windows.
 #[derive(Clone, Debug, Serialize)]
@@ -33,16 +34,19 @@ pub struct PredictionErrors {
 /// One realization's learned a_j next to its true disturbance.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealizationReport {
-    /// The manifest's wind (m/s², world frame).
-    pub true_wind_m_s2: [f32; 3],
-    /// The manifest's rotor efficiencies δᵢ.
-    pub true_rotor_efficiency: [f32; 4],
+    /// The manifest's wind (m/s², world frame), when known.
+    pub true_wind_m_s2: Option<[f32; 3]>,
+    /// The manifest's rotor efficiencies δᵢ, when known.
+    pub true_rotor_efficiency: Option<[f32; 4]>,
+    /// Marked disturbance-free at import (a_j pinned to 0).
+    pub disturbance_free: bool,
     /// The learned a_j.
     pub a: [f32; FEATURES],
     /// W(hover) a_j: the learned disturbance wrench at hover [F (N, body); τ (N·m, body)].
     pub learned_wrench_at_hover: [f32; 6],
-    /// The true disturbance wrench at hover: m w plus the rotor deficits at hover thrust.
-    pub true_wrench_at_hover: [f32; 6],
+    /// The true disturbance wrench at hover: m w plus the rotor deficits at hover thrust (when
+    /// the manifest gives the disturbance).
+    pub true_wrench_at_hover: Option<[f32; 6]>,
 }
 
 /// The training report (`FILE.hfw.json`).
@@ -88,17 +92,16 @@ pub fn prediction_errors<M: HamiltonianModel>(
     a: Option<&[[f32; FEATURES]]>,
 ) -> PredictionErrors {
     let dt = 1.0 / data.sample_hz;
-    let n = WINDOW_LEN - 1;
+    let n = data.window_len - 1;
     let mut acc = vec![[0f64; 4]; n];
     for &i in ids {
         let w = &data.windows[i];
         let aj = a
             .and_then(|a| a.get(w.realization).copied())
             .unwrap_or([0.0; FEATURES]);
-        let u = Vector4::from(w.u);
         let mut s = w.states[0];
         for (k, acc) in acc.iter_mut().enumerate() {
-            s = rk4_step(model, &s, &u, &aj, dt);
+            s = rk4_step(model, &s, &Vector4::from(w.u[k]), &aj, dt);
             let t = &w.states[k + 1];
             acc[0] += f64::from((s.p_m - t.p_m).norm_squared());
             acc[1] += f64::from(lie::geodesic_distance(&t.rot, &s.rot)).powi(2);
@@ -165,9 +168,15 @@ pub fn report(
             RealizationReport {
                 true_wind_m_s2: r.wind_m_s2,
                 true_rotor_efficiency: r.rotor_efficiency,
+                disturbance_free: r.disturbance_free,
                 a: *a,
                 learned_wrench_at_hover: std::array::from_fn(|k| d[k]),
-                true_wrench_at_hover: true_wrench_at_hover(&r.wind_m_s2, &r.rotor_efficiency),
+                true_wrench_at_hover: match (r.wind_m_s2, r.rotor_efficiency) {
+                    (Some(w), Some(e)) => Some(true_wrench_at_hover(&w, &e)),
+                    (Some(w), None) => Some(true_wrench_at_hover(&w, &[1.0; 4])),
+                    (None, Some(e)) => Some(true_wrench_at_hover(&[0.0; 3], &e)),
+                    (None, None) => None,
+                },
             }
         })
         .collect();
@@ -190,36 +199,6 @@ pub fn report(
         true_gain: std::array::from_fn(|r| std::array::from_fn(|c| tg[(r, c)])),
         realizations,
     }
-}
-
-/// Writes `bytes` to `path` whole: a temporary file in the same directory, then a rename.
-///
-/// # Errors
-/// Any I/O failure, naming the file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "weights".into());
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| -> Result<()> {
-        let mut f =
-            std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-        f.write_all(bytes)
-            .with_context(|| format!("writing {}", tmp.display()))?;
-        f.sync_all().ok();
-        std::fs::rename(&tmp, path)
-            .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 /// Writes the blob to `out` and the report to `out.json` (appending `.json` to the file name).

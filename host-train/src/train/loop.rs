@@ -1,5 +1,5 @@
-//! The training loop (paper Problem 1): RK4 through each window in (q, 𝔭) with the control held
-//! constant and d = W a_j inside the ODE, loss ℓ_p + ℓ_R + ℓ_ζ summed over the window's
+//! The training loop (paper Problem 1): RK4 through each window in (q, 𝔭), each step with its
+//! own logged command and d = W a_j inside the ODE, loss ℓ_p + ℓ_R + ℓ_ζ summed over the window's
 //! predicted states, Adam on θ (J⁻¹, g), φ (W) and the a_j.
 
 use super::data::StateBatch;
@@ -79,10 +79,16 @@ pub fn batch_loss(
     vel_weight: f32,
 ) -> Tensor<1> {
     let s0 = &b.states[0];
-    let forcing = Forcing::new(c, b.u.clone(), a_all, b.realization.clone());
     let mut x = model.to_phase(c, s0.p.clone(), s0.rot.clone(), s0.v.clone(), s0.w.clone());
-    let preds = (1..b.states.len()).map(|_| {
-        x = model.rk4(c, &x, &forcing, dt_s);
+    // a_j is selected once per batch (one node in the graph); only the command changes per step.
+    let mut forcing: Option<Forcing> = None;
+    let preds = b.u.iter().map(|u| {
+        let f = match forcing.take() {
+            None => Forcing::new(c, u.clone(), a_all.clone(), b.realization.clone()),
+            Some(prev) => prev.with_control(c, u.clone()),
+        };
+        x = model.rk4(c, &x, &f, dt_s);
+        forcing = Some(f);
         let (v, w) = model.velocities(c, &x);
         StateBatch {
             p: x.p.clone(),
@@ -173,6 +179,19 @@ pub fn train(
     let mut params = TModel::from_core(&init, &device).tensors();
     params.push(Tensor::zeros([n_real, FEATURES], &device));
     let n_net = params.len() - 1;
+    // Disturbance-free realizations keep a_j = 0: their rows are masked after every step.
+    let pinned: Vec<f32> = (0..n_real)
+        .map(|j| {
+            let free = data.realizations.get(j).is_some_and(|r| r.disturbance_free);
+            if free {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let any_pinned = pinned.contains(&0.0);
+    let a_mask: Tensor<2> = Tensor::from_data(TensorData::new(pinned, [n_real, 1]), &device);
     let mut adam = Adam::new(&params);
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_add(1));
     let val = |params: &[Tensor<2>]| {
@@ -234,6 +253,9 @@ pub fn train(
             let lv = f64::from(to_vec(&loss.inner())[0]);
             if lv.is_finite() {
                 adam.step(&mut params, &g, &lrs);
+                if any_pinned {
+                    params[n_net] = params[n_net].clone() * a_mask.clone();
+                }
                 if cfg.feature_decay > 0.0 {
                     let p = &mut params[FEATURE_INPUT_WEIGHT];
                     *p = p.clone().mul_scalar(1.0 - lr * cfg.feature_decay);
@@ -260,7 +282,6 @@ pub fn train(
         .chunks_exact(FEATURES)
         .map(|c| std::array::from_fn(|k| c[k]))
         .collect();
-    let _ = TensorData::new(vec![0f32], [1]);
     Trained {
         weights: model.to_core(),
         a,

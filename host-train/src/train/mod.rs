@@ -56,6 +56,8 @@ pub struct TrainConfig {
     pub hidden: usize,
     /// Number of disturbance features p; fixed by the core ([`FEATURES`]), checked here.
     pub features: usize,
+    /// How windows are cut from the dataset's flights (default: 5 states every 4 samples).
+    pub window: crate::dataset::WindowSpec,
 }
 
 impl Default for TrainConfig {
@@ -73,6 +75,7 @@ impl Default for TrainConfig {
             init_out_gain: 0.05,
             hidden: HIDDEN,
             features: FEATURES,
+            window: crate::dataset::WindowSpec::default(),
         }
     }
 }
@@ -91,7 +94,7 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
             cfg.features
         );
     }
-    let windows = data::load(data_dir)?;
+    let windows = data::load(data_dir, cfg.window)?;
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
     let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
     let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
@@ -104,7 +107,7 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
 /// `host-train train`: the command-line face of [`run`].
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
-    /// Dataset directory written by `host-train collect`.
+    /// Dataset directory written by `host-train collect` or `host-train import`.
     #[arg(long, value_name = "DIR")]
     pub data: std::path::PathBuf,
     /// Output weight blob; the report goes to FILE.json next to it.
@@ -140,6 +143,13 @@ pub struct TrainArgs {
     /// Decoupled weight decay on the feature network's input layer (0 = off).
     #[arg(long, default_value_t = TrainConfig::default().feature_decay)]
     pub feature_decay: f64,
+    /// States per training window (N + 1 in the paper's notation).
+    #[arg(long, default_value_t = crate::dataset::WindowSpec::default().len)]
+    pub window_len: usize,
+    /// Samples between the starts of consecutive windows (4 with `collect`'s defaults: one held
+    /// command per window; 1 uses every sample as a start).
+    #[arg(long, default_value_t = crate::dataset::WindowSpec::default().stride)]
+    pub stride: usize,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -159,6 +169,10 @@ impl TrainArgs {
             data_frac: self.data_frac,
             vel_weight: self.vel_weight,
             feature_decay: self.feature_decay,
+            window: crate::dataset::WindowSpec {
+                len: self.window_len,
+                stride: self.stride,
+            },
             ..TrainConfig::default()
         }
     }

@@ -279,6 +279,14 @@ impl Forcing {
             a: a_all.select(0, idx),
         }
     }
+
+    /// The same a_j with another raw control [B,4] (the next step of a window).
+    pub fn with_control(&self, c: &Consts, u: Tensor<2>) -> Self {
+        Self {
+            u_norm: u * c.control_inv_scale.clone(),
+            a: self.a.clone(),
+        }
+    }
 }
 
 impl TModel {
@@ -533,7 +541,7 @@ pub fn window_loss(
         });
     }
     total
-        .unwrap_or_else(|| Tensor::zeros([1, 1], &b.u.device()))
+        .unwrap_or_else(|| Tensor::zeros([1, 1], &b.realization.device()))
         .mean()
 }
 

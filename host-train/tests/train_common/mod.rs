@@ -1,12 +1,15 @@
-//! Shared helpers of the training tests: random states and a synthetic dataset written in the
-//! `hamflight-dataset-v1` format from a known model.
+//! Shared helpers of the training tests: random states and a synthetic dataset written through
+//! `host_train::dataset` (format `hamflight-dataset-v2`) from a known model.
 #![allow(dead_code)]
 
 use hamflight::model::{rk4_step, HamiltonianModel, State, FEATURES, GRAVITY_M_S2, MASS_KG};
+use host_train::dataset::{
+    realization_file, save, Dataset, Flight, Realization, RealizationMeta, Sample,
+};
+use host_train::PlantState;
 use nalgebra::{Vector3, Vector4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::fmt::Write as _;
 use std::path::Path;
 
 /// A random state: any attitude within `tilt_rad` of level, moderate velocities and rates.
@@ -38,9 +41,10 @@ pub fn random_control(rng: &mut impl Rng) -> Vector4<f32> {
     )
 }
 
-/// Writes a dataset of `windows` windows per entry of `a` (one realization each), integrated
-/// with `model`'s RK4 at 240 Hz under d = W a_j. The manifest's wind holds a_j[0..3] (exact for
-/// the nominal features) and efficiencies 1.
+/// Writes a dataset of `windows` windows per entry of `a` (one realization each; each window a
+/// flight of 5 states), integrated with `model`'s RK4 at 240 Hz under d = W a_j and a random
+/// command held over the window, through the crate's one dataset writer. The manifest's wind
+/// holds a_j[0..3] (exact for the nominal features) and efficiencies 1.
 pub fn write_dataset<M: HamiltonianModel>(
     dir: &Path,
     model: &M,
@@ -48,54 +52,67 @@ pub fn write_dataset<M: HamiltonianModel>(
     windows: usize,
     seed: u64,
 ) {
-    std::fs::create_dir_all(dir).unwrap();
+    write_dataset_with(dir, model, a, windows, seed, false);
+}
+
+/// [`write_dataset`], with a new random command at every step if `per_step`.
+pub fn write_dataset_with<M: HamiltonianModel>(
+    dir: &Path,
+    model: &M,
+    a: &[[f32; FEATURES]],
+    windows: usize,
+    seed: u64,
+    per_step: bool,
+) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let dt = 1.0 / 240.0;
-    let mut reals = Vec::new();
+    let mut ds = Dataset::new(
+        240.0,
+        f64::from(MASS_KG),
+        f64::from(GRAVITY_M_S2),
+        "collect",
+    );
+    ds.manifest.seed = Some(seed);
     for (j, aj) in a.iter().enumerate() {
-        let file = format!("realization_{j:02}.csv");
-        let mut csv = String::from("window,step,t_s,px,py,pz,r11,r12,r13,r21,r22,r23,r31,r32,r33,vx,vy,vz,wx,wy,wz,f_n,tau_x_nm,tau_y_nm,tau_z_nm,rpm1,rpm2,rpm3,rpm4\n");
-        for w in 0..windows {
+        let mut flights = Vec::with_capacity(windows);
+        for _ in 0..windows {
             let mut s = random_state(&mut rng, 0.3);
-            let u = random_control(&mut rng);
+            let mut u = random_control(&mut rng);
+            let mut samples = Vec::with_capacity(5);
             for step in 0..5 {
-                let r = &s.rot;
-                writeln!(
-                    csv,
-                    "{w},{step},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},0,0,0,0",
-                    step as f32 * dt,
-                    s.p_m.x, s.p_m.y, s.p_m.z,
-                    r.m11, r.m12, r.m13, r.m21, r.m22, r.m23, r.m31, r.m32, r.m33,
-                    s.v_body_m_s.x, s.v_body_m_s.y, s.v_body_m_s.z,
-                    s.w_body_rad_s.x, s.w_body_rad_s.y, s.w_body_rad_s.z,
-                    u.x, u.y, u.z, u.w
-                )
-                .unwrap();
+                if per_step && step > 0 {
+                    u = random_control(&mut rng);
+                }
+                samples.push(Sample {
+                    t_s: f64::from(step) / 240.0,
+                    state: PlantState {
+                        p_m: s.p_m.cast(),
+                        rot: s.rot.cast(),
+                        v_body_m_s: s.v_body_m_s.cast(),
+                        w_body_rad_s: s.w_body_rad_s.cast(),
+                    },
+                    wrench: [u.x, u.y, u.z, u.w].map(f64::from),
+                    rpm: None,
+                    acc_body_m_s2: None,
+                });
                 s = rk4_step(model, &s, &u, aj, dt);
             }
+            flights.push(Flight { samples });
         }
-        std::fs::write(dir.join(&file), csv).unwrap();
-        reals.push(serde_json::json!({
-            "file": file,
-            "wind_m_s2": [aj[0], aj[1], aj[2]],
-            "rotor_efficiency": [1.0, 1.0, 1.0, 1.0],
-            "windows": windows,
-        }));
+        ds.realizations.push(Realization {
+            meta: RealizationMeta {
+                file: realization_file(j),
+                source_file: None,
+                wind_m_s2: Some([aj[0], aj[1], aj[2]].map(f64::from)),
+                rotor_efficiency: Some([1.0; 4]),
+                disturbance_free: false,
+                flights: 0,
+                samples: 0,
+            },
+            flights,
+        });
     }
-    let manifest = serde_json::json!({
-        "format": "hamflight-dataset-v1",
-        "sample_hz": 240.0,
-        "window_len": 5,
-        "mass_kg": MASS_KG,
-        "gravity_m_s2": GRAVITY_M_S2,
-        "seed": seed,
-        "realizations": reals,
-    });
-    std::fs::write(
-        dir.join("manifest.json"),
-        serde_json::to_string_pretty(&manifest).unwrap(),
-    )
-    .unwrap();
+    save(dir, &ds).unwrap();
 }
 
 /// A fresh scratch directory under the target dir.
