@@ -19,7 +19,7 @@ use crate::adapt::{Adaptation, AdaptationRates, TrackingError};
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
-use nalgebra::{Matrix4, SVector, Vector3, Vector4};
+use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 
 /// Controller gains and adaptation rates.
 ///
@@ -101,7 +101,8 @@ impl Gains {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Faults {
-    /// The state had a NaN or infinite component.
+    /// The state had a NaN or infinite component, or its R is not a rotation
+    /// (see [`ROTATION_TOLERANCE`]).
     pub bad_state: bool,
     /// The setpoint had a NaN or infinite component.
     pub bad_setpoint: bool,
@@ -120,6 +121,24 @@ impl Faults {
     pub fn is_fault(&self) -> bool {
         self.bad_state || self.bad_setpoint || self.bad_dt || self.numeric
     }
+}
+
+/// Largest accepted ‖RᵀR − I‖_F for the state's attitude (dimensionless); beyond it, or with
+/// det R ≤ 0 (a reflection), the state is `bad_state` and the motors go off.
+///
+/// A rotation rounded to f32 (from a unit quaternion, or an integrated attitude) sits near 1e-6;
+/// a quaternion whose norm is off by ε gives ≈ 4√3 ε, so 1e-3 accepts a quaternion normalized to
+/// ≈ 1.4e-4, while a matrix scaled by 1.001 or sheared by 1e-3 is already refused. Inside the
+/// tolerance the law's errors (e_R, Rᵀ v*) change by the same relative 1e-3: harmless.
+pub const ROTATION_TOLERANCE: f32 = 1e-3;
+
+/// True if `r` is a rotation to [`ROTATION_TOLERANCE`]: ‖RᵀR − I‖_F ≤ tolerance and det R > 0.
+/// False for non-finite entries.
+pub fn is_rotation(r: &Matrix3<f32>) -> bool {
+    let d = r.transpose() * r - Matrix3::identity();
+    let dev2 = d.iter().map(|x| x * x).sum::<f32>();
+    // The comparisons are false for NaN: a non-finite R is refused.
+    dev2 <= ROTATION_TOLERANCE * ROTATION_TOLERANCE && r.determinant() > 0.0
 }
 
 /// What one control step produces.
@@ -192,7 +211,7 @@ impl<M: HamiltonianModel> FlightController<M> {
     /// then one step of the adaptation law.
     pub fn step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output {
         let mut faults = Faults {
-            bad_state: !state.is_finite(),
+            bad_state: !(state.is_finite() && is_rotation(&state.rot)),
             bad_setpoint: !sp.is_finite(),
             bad_dt: !(dt_s > 0.0 && dt_s <= 0.1),
             ..Faults::default()

@@ -28,7 +28,7 @@ pub mod model;
 pub mod nn;
 pub mod reference;
 
-pub use control::{Faults, FlightController, Gains, Output};
+pub use control::{is_rotation, Faults, FlightController, Gains, Output, ROTATION_TOLERANCE};
 pub use mixer::{RotorCommand, Wrench};
 pub use model::State;
 pub use reference::Setpoint;
