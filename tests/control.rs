@@ -125,7 +125,10 @@ fn default_gains_are_pinned() {
         (800.0, 500.0, 20_000.0, 2_000.0)
     );
     assert!(g.adapt);
+    assert_eq!(g.law, hamflight::AdaptationLaw::Gradient);
+    assert!(g.rates.drive_max_m.is_infinite() && g.rates.soft_freeze_m.is_infinite());
     let p = Gains::paper();
+    assert_eq!(p.law, hamflight::AdaptationLaw::Gradient);
     assert_eq!(
         (p.k_r, p.k_w, p.rates.c_p, p.rates.c_r),
         (1.0, 0.08, 0.04, 0.5)
