@@ -9,6 +9,8 @@
 //! - [`scenario`]: TOML scenario files;
 //! - [`dataset`]: `collect` (paper Sec. 4) and the dataset format with its loader;
 //! - [`eval`]: closed-loop flights, `report.json`;
+//! - [`events`]: scores around rotor faults and wind steps;
+//! - [`estimator`]: the adaptation's bandwidth against a sinusoidal wind;
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
 //! - [`bridge`]: the JSON-lines bridge for external simulators;
@@ -20,7 +22,9 @@ pub mod bridge;
 pub mod controller;
 pub mod dataset;
 pub mod demo;
+pub mod estimator;
 pub mod eval;
+pub mod events;
 pub mod flight;
 pub mod plant;
 pub mod plot;
