@@ -42,9 +42,13 @@
 //! - the measured force and W are low-passed by the same first-order filter (time constant
 //!   `filter_tau_s`), so ε compares like with like and the differences' noise is smoothed;
 //! - the rows are scaled to a's units (force rows / m → m/s², torque rows / 1e-3 N·m), and the
-//!   estimate is a Kalman filter for a random walk a: P ← P + Q dt, K = P Hᵀ(H P Hᵀ + R)⁻¹,
-//!   a ← a + K ε, P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ (Joseph form: symmetric PSD in f32), then
-//!   symmetrized and bounded (largest diagonal ≤ p_max, by scaling, which keeps it PD). The
+//!   estimate is a Kalman filter for a random walk a: P ← P + Q dt, then, R being diagonal, the
+//!   six rows hᵢ as six scalar measurements in turn (exactly the batch K = P Hᵀ(H P Hᵀ + R)⁻¹
+//!   update, without a 6×6 solve): k = P hᵢᵀ / sᵢ with sᵢ = hᵢ P hᵢᵀ + rᵢ, a ← a + k εᵢ,
+//!   P ← P − (P hᵢᵀ)(P hᵢᵀ)ᵀ / sᵢ, an outer product of one vector, so P stays exactly symmetric
+//!   in f32; a diagonal that rounding drives to ≤ 0 restarts P at p0 I, and P is bounded
+//!   (largest diagonal ≤ p_max, by scaling, which keeps it PD). (A 6×6 Joseph form cost 11,600
+//!   instructions a step on the MCU.) The
 //!   process noise Q is what lets it follow a changing disturbance: its bandwidth is about
 //!   √(q / (r dt)) for one row.
 //!
@@ -403,21 +407,31 @@ impl Adaptation {
                 *qi = g.q_torque;
             }
         }
-        let p = self.p + M6::from_diagonal(&(q * dt_s));
-        let r = SMatrix::<f32, 6, 6>::from_diagonal(&Vector6::new(
+        let mut p = self.p + M6::from_diagonal(&(q * dt_s));
+        let r = [
             g.r_force, g.r_force, g.r_force, g.r_torque, g.r_torque, g.r_torque,
-        ));
-        // Update.
-        let hp = h * p; // 6×p
-        let s = hp * h.transpose() + r;
-        let chol = nalgebra::Cholesky::new(s)?;
-        let kt = chol.solve(&hp); // Kᵀ = S⁻¹ H P
-        let k = kt.transpose();
+        ];
+        // Update: R is diagonal, so the six rows are six independent scalar measurements,
+        // processed one after the other (exactly the batch update, without a 6×6 solve).
         let eps = self.pred.z_f - h * self.a;
-        let a_next = self.a + k * eps;
-        let ikh = M6::identity() - k * h;
-        let p_next = ikh * p * ikh.transpose() + k * r * kt;
-        let mut p_next = (p_next + p_next.transpose()) * 0.5;
+        let mut a_next = self.a;
+        for ((hi, zi), ri) in h.row_iter().zip(self.pred.z_f.iter()).zip(r.iter()) {
+            let hi = hi.transpose();
+            let ph = p * hi;
+            let s = hi.dot(&ph) + ri;
+            if !(s > 0.0 && s.is_finite()) {
+                continue;
+            }
+            let k = ph / s;
+            a_next += k * (zi - hi.dot(&a_next));
+            // P − P hᵀ h P / s: (ph phᵀ) is exactly symmetric in floating point.
+            p -= (ph * ph.transpose()) * (1.0 / s);
+        }
+        let mut p_next = p;
+        if (0..FEATURES).any(|i| p_next.get((i, i)).is_none_or(|d| *d <= 0.0)) {
+            // Rounding lost definiteness: start the gain again.
+            p_next = M6::identity() * g.p0;
+        }
         let dmax = (0..FEATURES)
             .filter_map(|i| p_next.get((i, i)).copied())
             .fold(0.0f32, f32::max);
