@@ -3,7 +3,7 @@
 //! A `no_std`, allocation-free, f32 implementation of "Physics-guided Learning-based Adaptive
 //! Control on the SE(3) Manifold" (Duong & Atanasov) for Crazyflie-class quadrotors: fixed-size
 //! inference of the learned port-Hamiltonian model, the energy-based (IDA-PBC) tracking controller
-//! and the disturbance adaptation law.
+//! and the disturbance adaptation law (the paper's, and a composite law beside it).
 //!
 //! Data flows one way: state + setpoint → controller → wrench → mixer → motors.
 //!
@@ -13,7 +13,8 @@
 //! - [`model`]: the learned Hamiltonian model's networks;
 //! - [`reference`]: setpoints and the desired attitude from differential flatness;
 //! - [`control`]: the IDA-PBC tracking law and the [`FlightController`];
-//! - [`adapt`]: the disturbance adaptation law;
+//! - [`adapt`]: the disturbance adaptation laws: the paper's gradient law and the composite
+//!   (prediction-error) law, with the platform's extra [`Measurement`];
 //! - [`mixer`]: wrench to rotor commands with saturation;
 //! - [`fpu`]: fused multiply–add dense layers and square root on the M4F's FPU, bit-identical on the host;
 //! - [`blob`]: the checked weight-blob codec.
@@ -30,7 +31,8 @@ pub mod model;
 pub mod nn;
 pub mod reference;
 
-pub use control::{Faults, FlightController, Gains, Output};
+pub use adapt::{AdaptationLaw, Measurement};
+pub use control::{is_rotation, Faults, FlightController, Gains, Output, ROTATION_TOLERANCE};
 pub use mixer::{RotorCommand, Wrench};
 pub use model::State;
 pub use reference::Setpoint;

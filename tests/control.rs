@@ -125,9 +125,85 @@ fn default_gains_are_pinned() {
         (800.0, 500.0, 20_000.0, 2_000.0)
     );
     assert!(g.adapt);
+    assert_eq!(g.law, hamflight::AdaptationLaw::Gradient);
+    assert!(g.rates.drive_max_m.is_infinite() && g.rates.soft_freeze_m.is_infinite());
     let p = Gains::paper();
+    assert_eq!(p.law, hamflight::AdaptationLaw::Gradient);
     assert_eq!(
         (p.k_r, p.k_w, p.rates.c_p, p.rates.c_r),
         (1.0, 0.08, 0.04, 0.5)
     );
+}
+
+fn hover_pair() -> (State, Setpoint) {
+    let s = State {
+        p_m: Vector3::new(0.0, 0.0, 1.0),
+        ..State::default()
+    };
+    (s, Setpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0))
+}
+
+fn flies(fc: &mut FlightController<NominalModel>, rot: Matrix3<f32>) -> bool {
+    let (mut s, sp) = hover_pair();
+    s.rot = rot;
+    let out = fc.step(&s, &sp, 0.002);
+    if out.faults.bad_state {
+        assert!(out.faults.is_fault());
+        assert_eq!(out.rotors, RotorCommand::OFF);
+    }
+    !out.faults.bad_state
+}
+
+#[test]
+fn near_rotations_fly() {
+    let mut fc = FlightController::new(NominalModel::default(), Gains::default());
+    let base = hamflight::lie::exp(&Vector3::new(0.3, -0.2, 2.0));
+    // Rounding-level perturbations of single entries, and a quaternion normalized to 1e-5.
+    for (i, eps) in [(0usize, 1e-5f32), (4, -2e-5), (7, 5e-5), (8, 1e-4)] {
+        let mut r = base;
+        r[i] += eps;
+        assert!(flies(&mut fc, r), "entry {i} off by {eps}: refused");
+    }
+    let q = nalgebra::Quaternion::new(0.9, 0.1, -0.3, 0.2);
+    let q = q / q.norm() * (1.0 + 1e-5);
+    let unit = nalgebra::UnitQuaternion::new_unchecked(q);
+    assert!(flies(&mut fc, unit.to_rotation_matrix().into_inner()));
+    // A full-turn rotation from the core's own exp map.
+    assert!(flies(
+        &mut fc,
+        hamflight::lie::exp(&Vector3::new(3.1, 0.0, 0.0))
+    ));
+}
+
+#[test]
+fn scaled_sheared_and_reflected_matrices_are_bad_states() {
+    let mut fc = FlightController::new(NominalModel::default(), Gains::default());
+    let base = hamflight::lie::exp(&Vector3::new(0.3, -0.2, 2.0));
+    for k in [1.001f32, 0.999, 1.01, 0.5, 2.0, 0.0] {
+        assert!(!flies(&mut fc, base * k), "R × {k} accepted");
+    }
+    for shear in [1e-3f32, 0.01, 0.3] {
+        let mut s = Matrix3::identity();
+        s.m12 = shear;
+        assert!(!flies(&mut fc, base * s), "R sheared by {shear} accepted");
+    }
+    // Reflections: orthogonal with det −1, which RᵀR = I alone does not catch.
+    let mirror = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+    for r in [-base, base * mirror, mirror] {
+        assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-5);
+        assert!(!flies(&mut fc, r), "reflection accepted: {r}");
+    }
+    // After all of that, a rotation flies at once and the estimate was not touched.
+    assert!(flies(&mut fc, base));
+    assert!(fc.estimate().iter().all(|a| a.is_finite()));
+}
+
+#[test]
+fn rotation_tolerance_is_documented_value() {
+    assert_eq!(hamflight::ROTATION_TOLERANCE, 1e-3);
+    let mut r = Matrix3::<f32>::identity();
+    r.m11 = 1.0 + 0.4e-3; // ‖RᵀR − I‖ ≈ 0.8e-3: inside
+    assert!(hamflight::is_rotation(&r));
+    r.m11 = 1.0 + 0.6e-3; // ≈ 1.2e-3: outside
+    assert!(!hamflight::is_rotation(&r));
 }

@@ -79,6 +79,20 @@ pub trait Controller {
         dt_s: f64,
     ) -> [f64; 4];
 
+    /// [`Controller::step`] with the accelerometer's reading (specific force in the body frame,
+    /// m/s²) when the platform gives one. Controllers that do not use it ignore it (the default).
+    fn step_measured(
+        &mut self,
+        t_s: f64,
+        state: &PlantState,
+        acc_body_m_s2: Option<&Vector3<f64>>,
+        reference: &TrajectoryPoint,
+        dt_s: f64,
+    ) -> [f64; 4] {
+        let _ = acc_body_m_s2;
+        self.step(t_s, state, reference, dt_s)
+    }
+
     /// The current adaptation estimate (e.g. the paper's `a`), if the controller adapts.
     fn adaptation_estimate(&self) -> Option<Vec<f64>> {
         None

@@ -20,6 +20,7 @@
 //! | `wall_s` | wall-clock time of the flight (s) |
 //! | `sim_speed` | simulated seconds per wall second |
 //! | `control_step_us` | mean wall time of one controller step on this host (µs) |
+//! | `events` | per disturbance event (rotor fault onset, wind step edge): `t_s`, `peak_err_m` (until the next event), `recovery_s` (until the error stays < 1 cm; null if never), `rmse_after_m` (over the 5 s after) |
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -40,6 +41,9 @@ pub const CRASH_ERR_M: f64 = 1.0;
 /// Start of the scoring window (s): RMSE after the adaptation transient.
 pub const WINDOW_START_S: f64 = 5.0;
 
+/// Seed offset of the accelerometer's noise stream.
+const ACC_NOISE_STREAM: u64 = 0xACCE_1E20;
+
 /// Fly `scenario` with `ctrl` (which is reset first). Stops early on a crash.
 pub fn fly(scenario: &Scenario, ctrl: &mut dyn Controller) -> FlightLog {
     fly_with_progress(scenario, ctrl, None)
@@ -55,6 +59,9 @@ pub fn fly_with_progress(
     ctrl.reset();
     let mut plant = scenario.plant();
     let mut rng = ChaCha8Rng::seed_from_u64(scenario.spec.seed);
+    // The accelerometer's noise has its own stream, so the state noise is the same with or
+    // without it.
+    let mut rng_acc = ChaCha8Rng::seed_from_u64(scenario.spec.seed ^ ACC_NOISE_STREAM);
     let dt = scenario.control_dt_s();
     let nsub = scenario.physics_substeps();
     let dt_phys = dt / nsub as f64;
@@ -93,8 +100,9 @@ pub fn fly_with_progress(
             break;
         }
         let meas = plant.measure(&mut rng);
+        let acc = plant.measure_accelerometer(&mut rng_acc);
         let c0 = Instant::now();
-        let cmd = ctrl.step(t, &meas, &r, dt);
+        let cmd = ctrl.step_measured(t, &meas, Some(&acc), &r, dt);
         log.control_wall_s += c0.elapsed().as_secs_f64();
         log.control_steps += 1;
         last_cmd = plant.params.clamp_rpm(cmd);
@@ -149,6 +157,9 @@ pub struct Report {
     pub sim_speed: f64,
     /// Mean controller step cost on the host (µs).
     pub control_step_us: f64,
+    /// Scores around the disturbance's events ([`crate::events`]); empty without events.
+    #[serde(default)]
+    pub events: Vec<crate::events::EventMetrics>,
 }
 
 fn rms(xs: impl Iterator<Item = f64>) -> Option<f64> {
@@ -196,6 +207,15 @@ impl Report {
             } else {
                 0.0
             },
+            events: Vec::new(),
+        }
+    }
+
+    /// [`Report::from_log`] with the event scores of `scenario` filled in.
+    pub fn from_flight(log: &FlightLog, scenario: &Scenario, scenario_file: Option<&Path>) -> Self {
+        Self {
+            events: crate::events::event_metrics(scenario, log),
+            ..Self::from_log(log, scenario_file)
         }
     }
 }
@@ -206,11 +226,13 @@ pub struct EvalArgs {
     /// Scenario TOML file to fly (see scenarios/*.toml for the keys).
     #[arg(long, value_name = "FILE")]
     pub scenario: PathBuf,
-    /// Controller to fly: pid, geometric, ida-pbc, geometric-adaptive, learned or adaptive
-    /// (default: the scenario's `controller` key, else `geometric`).
+    /// Controller to fly: pid, geometric, ida-pbc, geometric-adaptive, learned or adaptive, or
+    /// an adaptive one with its law named (adaptive-gradient, adaptive-composite,
+    /// geometric-adaptive-gradient, geometric-adaptive-composite) (default: the scenario's
+    /// `controller` key, else `geometric`).
     #[arg(long, value_name = "NAME")]
     pub controller: Option<String>,
-    /// Weight blob of the learned model, for `learned` and `adaptive`.
+    /// Weight blob of the learned model, for `learned` and `adaptive*`.
     #[arg(long, value_name = "FILE", default_value = crate::flight::DEFAULT_WEIGHTS)]
     pub weights: PathBuf,
     /// Output directory for report.json, path.svg and error.svg (created if missing).
@@ -250,7 +272,7 @@ pub fn run(args: &EvalArgs) -> Result<Report> {
         None => fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb)),
     };
     pb.finish_and_clear();
-    let report = Report::from_log(&log, Some(&args.scenario));
+    let report = Report::from_flight(&log, &scenario, Some(&args.scenario));
     write_json_atomic(&args.out.join("report.json"), &report)?;
     crate::plot::path_svg(&[(name.as_str(), &log)], &args.out.join("path.svg"))?;
     crate::plot::error_svg(&[(name.as_str(), &log)], &args.out.join("error.svg"))?;

@@ -2,18 +2,23 @@
 //! SITL plant flies the exact f32 code the firmware runs.
 //!
 //! Names in `host-train eval --controller`:
-//! - `adaptive`: learned model + adaptation (the paper's controller);
+//! - `adaptive`: learned model + adaptation (the paper's controller; the default law is the
+//!   composite one, see [`hamflight::adapt`]);
 //! - `learned`: learned model, adaptation off (the paper's "without adaptation");
 //! - `geometric-adaptive`: nominal model with hand-chosen features (a constant world force and
 //!   a constant body torque) + adaptation — the classic adaptive baseline;
-//! - `ida-pbc`: nominal model, no adaptation (the energy-based law on the true constants).
+//! - `ida-pbc`: nominal model, no adaptation (the energy-based law on the true constants);
+//! - `adaptive-gradient`, `adaptive-composite`, `geometric-adaptive-gradient`,
+//!   `geometric-adaptive-composite`: the two adaptive controllers with the adaptation law named
+//!   (the paper's gradient law or the composite law of [`hamflight::adapt`]); the plain names use
+//!   the default law ([`Gains::default`]).
 
 use crate::controller::{Controller, TrajectoryPoint};
 use crate::plant::PlantState;
 use crate::scenario::Scenario;
 use anyhow::{bail, Context, Result};
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
-use hamflight::{FlightController, Gains, Output, Setpoint, State};
+use hamflight::{AdaptationLaw, FlightController, Gains, Measurement, Output, Setpoint, State};
 use std::path::Path;
 
 /// The weight blob `adaptive` and `learned` use when none is given.
@@ -23,7 +28,7 @@ pub const DEFAULT_WEIGHTS: &str = "weights/default.hfw";
 pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     (
         "adaptive",
-        "learned Hamiltonian model + adaptation law (the paper's controller)",
+        "learned Hamiltonian model + adaptation (the paper's controller; composite law)",
     ),
     (
         "learned",
@@ -31,13 +36,37 @@ pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     ),
     (
         "geometric-adaptive",
-        "nominal model + adaptation on a constant world force and body torque",
+        "nominal model + adaptation on a constant world force and body torque (composite law)",
     ),
     (
         "ida-pbc",
         "the energy-based law on the nominal model, no adaptation",
     ),
+    (
+        "adaptive-gradient",
+        "adaptive with the paper's gradient adaptation law",
+    ),
+    (
+        "adaptive-composite",
+        "adaptive with the composite (prediction-error) adaptation law",
+    ),
+    (
+        "geometric-adaptive-gradient",
+        "geometric-adaptive with the paper's gradient adaptation law",
+    ),
+    (
+        "geometric-adaptive-composite",
+        "geometric-adaptive with the composite (prediction-error) adaptation law",
+    ),
 ];
+
+/// The default gains with the adaptation law `law`.
+pub fn gains_with(law: AdaptationLaw) -> Gains {
+    Gains {
+        law,
+        ..Gains::default()
+    }
+}
 
 /// A host controller that is the core's: it also gives the core's full [`Output`].
 pub trait CoreStep: Controller {
@@ -75,7 +104,31 @@ pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreSt
             Gains::default(),
         )),
         "learned" => Box::new(CoreController::new(name, load_learned(weights)?, no_adapt)),
+        "adaptive-gradient" | "adaptive-composite" => {
+            let law = if name.ends_with("composite") {
+                AdaptationLaw::Composite
+            } else {
+                AdaptationLaw::Gradient
+            };
+            Box::new(CoreController::new(
+                name,
+                load_learned(weights)?,
+                gains_with(law),
+            ))
+        }
         "geometric-adaptive" => Box::new(geometric_adaptive()),
+        "geometric-adaptive-gradient" | "geometric-adaptive-composite" => {
+            let law = if name.ends_with("composite") {
+                AdaptationLaw::Composite
+            } else {
+                AdaptationLaw::Gradient
+            };
+            Box::new(CoreController::new(
+                name,
+                NominalModel::default(),
+                gains_with(law),
+            ))
+        }
         "ida-pbc" => Box::new(ida_pbc()),
         _ => {
             let names: Vec<&str> = CORE_CONTROLLERS.iter().map(|(n, _)| *n).collect();
@@ -144,14 +197,28 @@ impl<M: HamiltonianModel> Controller for CoreController<M> {
 
     fn step(
         &mut self,
-        _t_s: f64,
+        t_s: f64,
         state: &PlantState,
         reference: &TrajectoryPoint,
         dt_s: f64,
     ) -> [f64; 4] {
+        self.step_measured(t_s, state, None, reference, dt_s)
+    }
+
+    fn step_measured(
+        &mut self,
+        _t_s: f64,
+        state: &PlantState,
+        acc_body_m_s2: Option<&nalgebra::Vector3<f64>>,
+        reference: &TrajectoryPoint,
+        dt_s: f64,
+    ) -> [f64; 4] {
+        let meas = Measurement {
+            acc_body_m_s2: acc_body_m_s2.map(|a| a.cast::<f32>()),
+        };
         let out = self
             .inner
-            .step(&state.into(), &reference.into(), dt_s as f32);
+            .step_measured(&state.into(), &reference.into(), &meas, dt_s as f32);
         self.last = Some(out);
         out.rotors.rpm.map(f64::from)
     }

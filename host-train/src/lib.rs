@@ -15,6 +15,8 @@
 //! - [`eval`]: closed-loop flights, `report.json`;
 //! - [`flightlog`]: the per-tick log of one flight;
 //! - [`fsutil`]: atomic file writing;
+//! - [`events`]: scores around rotor faults and wind steps;
+//! - [`estimator`]: the adaptation's bandwidth against a sinusoidal wind;
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
 //! - [`bridge`]: the JSON-lines bridge for external simulators;
@@ -27,7 +29,9 @@ pub mod collect;
 pub mod controller;
 pub mod dataset;
 pub mod demo;
+pub mod estimator;
 pub mod eval;
+pub mod events;
 pub mod flight;
 pub mod flightlog;
 pub mod fsutil;

@@ -203,10 +203,12 @@ pub struct StateNoise {
     pub att_rad: f64,
     /// Body angular-rate noise σ (rad/s).
     pub rate_rad_s: f64,
+    /// Accelerometer noise σ (m/s², per axis), on [`Plant::accelerometer`]'s reading.
+    pub acc_m_s2: f64,
 }
 
 impl StateNoise {
-    /// True if every σ is zero.
+    /// True if every σ of the state (not the accelerometer) is zero.
     pub fn is_off(&self) -> bool {
         self.pos_m == 0.0 && self.vel_m_s == 0.0 && self.att_rad == 0.0 && self.rate_rad_s == 0.0
     }
@@ -268,6 +270,58 @@ impl Disturbance {
         } else {
             [1.0; 4]
         }
+    }
+}
+
+/// One sinusoidal wind component: w(t) += amplitude sin(2π f t + phase).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindSine {
+    /// Amplitude per world axis (m/s², specific force).
+    pub amplitude_m_s2: [f64; 3],
+    /// Frequency f (Hz).
+    pub frequency_hz: f64,
+    /// Phase (rad).
+    #[serde(default)]
+    pub phase_rad: f64,
+}
+
+/// One wind step: w(t) += wind_m_s2 for from_s ≤ t < until_s.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindStep {
+    /// Added wind (m/s², world).
+    pub wind_m_s2: [f64; 3],
+    /// Start (s).
+    pub from_s: f64,
+    /// End (s); none: to the end of the flight.
+    #[serde(default)]
+    pub until_s: Option<f64>,
+}
+
+/// Time-varying wind on top of [`Disturbance`]'s constant wind: a sum of sinusoids and steps.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WindVariation {
+    /// Sinusoids.
+    pub sines: Vec<WindSine>,
+    /// Steps.
+    pub steps: Vec<WindStep>,
+}
+
+impl WindVariation {
+    /// The added wind at `t_s` (m/s², world).
+    pub fn at(&self, t_s: f64) -> Vector3<f64> {
+        let mut w = Vector3::zeros();
+        for s in &self.sines {
+            let k = (core::f64::consts::TAU * s.frequency_hz * t_s + s.phase_rad).sin();
+            w += Vector3::from(s.amplitude_m_s2) * k;
+        }
+        for s in &self.steps {
+            if t_s >= s.from_s && s.until_s.is_none_or(|u| t_s < u) {
+                w += Vector3::from(s.wind_m_s2);
+            }
+        }
+        w
     }
 }
 
@@ -411,6 +465,8 @@ pub struct Plant {
     pub disturbance: Disturbance,
     /// Optional effects.
     pub effects: Effects,
+    /// Time-varying wind added to `disturbance`'s (empty by default).
+    pub wind_variation: WindVariation,
     state: PlantState,
     rotor_rpm: [f64; 4],
     t_s: f64,
@@ -433,6 +489,7 @@ impl Plant {
             params,
             disturbance,
             effects,
+            wind_variation: WindVariation::default(),
             state: initial,
             rotor_rpm: [h; 4],
             t_s: 0.0,
@@ -496,6 +553,30 @@ impl Plant {
         s
     }
 
+    /// The total wind at `t_s`: the disturbance's plus the variation (m/s², world).
+    pub fn wind_at(&self, t_s: f64) -> Vector3<f64> {
+        self.disturbance.wind_at(t_s) + self.wind_variation.at(t_s)
+    }
+
+    /// The accelerometer's ideal reading now: the specific force (every force but gravity, over
+    /// m) in the body frame (m/s²), from the rotors' current speeds.
+    pub fn accelerometer(&self) -> Vector3<f64> {
+        let f = self.forces(self.t_s, &self.state, &self.rotor_rpm);
+        let g_body = self.state.rot.transpose()
+            * Vector3::new(0.0, 0.0, -self.params.mass_kg * self.params.gravity_m_s2);
+        (f.force_body_n - g_body) / self.params.mass_kg
+    }
+
+    /// [`Plant::accelerometer`] plus the configured noise σ `effects.noise.acc_m_s2`.
+    pub fn measure_accelerometer<R: Rng + ?Sized>(&self, rng: &mut R) -> Vector3<f64> {
+        let sigma = self.effects.noise.acc_m_s2;
+        let mut a = self.accelerometer();
+        if sigma > 0.0 {
+            a += Vector3::new(gaussian(rng), gaussian(rng), gaussian(rng)) * sigma;
+        }
+        a
+    }
+
     /// Forces and torques on the body at time `t_s` in state `s` with rotor speeds `rotor_rpm`.
     pub fn forces(&self, t_s: f64, s: &PlantState, rotor_rpm: &[f64; 4]) -> Forces {
         let prm = &self.params;
@@ -528,8 +609,7 @@ impl Plant {
             ty -= ROTOR_XY_SIGN[i][0] * a * thrust[i];
         }
         let m = prm.mass_kg;
-        let ext_world =
-            m * (self.disturbance.wind_at(t_s) - Vector3::new(0.0, 0.0, prm.gravity_m_s2));
+        let ext_world = m * (self.wind_at(t_s) - Vector3::new(0.0, 0.0, prm.gravity_m_s2));
         let mut force = Vector3::new(0.0, 0.0, f) + s.rot.transpose() * ext_world;
         if self.effects.rotor_drag {
             let c = Vector3::from(prm.drag_coeff);

@@ -31,7 +31,12 @@
 //! wind_m_s2 = [0.75, 0.75, 0.0]  # world wind as specific force w (m/s²): force m·w
 //! wind_onset_s = 0.0             # wind acts from this time (s)
 //! rotor_efficiency = [0.8, 0.8, 1.0, 1.0]  # δ₁..δ₄ in [0, 2]: thrust and torque factor
-//! onset_s = 0.0                  # efficiencies apply from this time (s)
+//! onset_s = 0.0                  # efficiencies apply from this time (s): a mid-flight
+//!                                # rotor fault is an onset_s > 0
+//! [[disturbance.wind_sines]]     # optional, repeatable: w(t) += A sin(2π f t + φ)
+//! amplitude_m_s2 = [0.4, 0.0, 0.0]; frequency_hz = 0.5; phase_rad = 0.0
+//! [[disturbance.wind_steps]]     # optional, repeatable: w(t) += wind_m_s2 on [from_s, until_s)
+//! wind_m_s2 = [0.8, 0.6, 0.0]; from_s = 6.0; until_s = 16.0   # until_s optional (to the end)
 //!
 //! [effects]                      # optional; all off by default
 //! rotor_drag = false
@@ -39,6 +44,7 @@
 //! motor_tau_s = 0.0              # first-order motor lag time constant (s), 0 = off
 //! [effects.noise]                # measurement noise σ on the controller's state
 //! pos_m = 0.0; vel_m_s = 0.0; att_rad = 0.0; rate_rad_s = 0.0
+//! acc_m_s2 = 0.0                 # accelerometer noise σ (m/s²), its own random stream
 //!
 //! [start]                        # optional; default: at rest, level, on p*(0) with yaw ψ*(0)
 //! position_m = [0.0, 0.0, 0.5]
@@ -56,7 +62,10 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::controller::TrajectoryPoint;
-use crate::plant::{rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams};
+use crate::plant::{
+    rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams, WindSine, WindStep,
+    WindVariation,
+};
 
 /// The reference trajectory's shape.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -120,6 +129,10 @@ pub struct DisturbanceSpec {
     pub rotor_efficiency: [f64; 4],
     /// Efficiency onset (s).
     pub onset_s: f64,
+    /// Sinusoidal wind components (added).
+    pub wind_sines: Vec<WindSine>,
+    /// Wind steps (added).
+    pub wind_steps: Vec<WindStep>,
 }
 
 impl Default for DisturbanceSpec {
@@ -129,7 +142,30 @@ impl Default for DisturbanceSpec {
             wind_onset_s: 0.0,
             rotor_efficiency: [1.0; 4],
             onset_s: 0.0,
+            wind_sines: Vec::new(),
+            wind_steps: Vec::new(),
         }
+    }
+}
+
+impl DisturbanceSpec {
+    /// The times (s) at which the disturbance changes abruptly, sorted: the wind onset and the
+    /// efficiency onset when after t = 0, and each wind step's edges.
+    pub fn event_times_s(&self) -> Vec<f64> {
+        let mut t = Vec::new();
+        if self.wind_onset_s > 0.0 && self.wind_m_s2 != [0.0; 3] {
+            t.push(self.wind_onset_s);
+        }
+        if self.onset_s > 0.0 && self.rotor_efficiency != [1.0; 4] {
+            t.push(self.onset_s);
+        }
+        for s in &self.wind_steps {
+            t.push(s.from_s);
+            t.extend(s.until_s);
+        }
+        t.sort_by(f64::total_cmp);
+        t.dedup();
+        t
     }
 }
 
@@ -294,14 +330,24 @@ impl Scenario {
         }
     }
 
+    /// The time-varying part of the wind.
+    pub fn wind_variation(&self) -> WindVariation {
+        WindVariation {
+            sines: self.spec.disturbance.wind_sines.clone(),
+            steps: self.spec.disturbance.wind_steps.clone(),
+        }
+    }
+
     /// A fresh plant at t = 0 in the initial state.
     pub fn plant(&self) -> Plant {
-        Plant::new(
+        let mut p = Plant::new(
             self.vehicle.clone(),
             self.disturbance(),
             self.spec.effects.clone(),
             self.initial_state(),
-        )
+        );
+        p.wind_variation = self.wind_variation();
+        p
     }
 
     /// The reference at time `t_s`, with analytic derivatives up to jerk.
@@ -505,6 +551,27 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
     if !d.onset_s.is_finite() || !d.wind_onset_s.is_finite() {
         bail!("keys `disturbance.onset_s`/`wind_onset_s`: expected finite times (s)");
     }
+    for (i, w) in d.wind_sines.iter().enumerate() {
+        let ok = finite_all(&w.amplitude_m_s2)
+            && w.phase_rad.is_finite()
+            && w.frequency_hz.is_finite()
+            && w.frequency_hz >= 0.0;
+        if !ok {
+            bail!(
+                "key `disturbance.wind_sines[{i}]`: expected finite amplitudes (m/s²), phase \
+                 (rad) and a frequency ≥ 0 Hz"
+            );
+        }
+    }
+    for (i, w) in d.wind_steps.iter().enumerate() {
+        let until_ok = w.until_s.is_none_or(|u| u.is_finite() && u > w.from_s);
+        if !(finite_all(&w.wind_m_s2) && w.from_s.is_finite() && until_ok) {
+            bail!(
+                "key `disturbance.wind_steps[{i}]`: expected finite wind (m/s²), a finite \
+                 `from_s` and an `until_s` after it"
+            );
+        }
+    }
     let e = &s.effects;
     if !(e.motor_tau_s.is_finite() && e.motor_tau_s >= 0.0) {
         bail!(
@@ -513,7 +580,7 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
         );
     }
     let n = &e.noise;
-    if ![n.pos_m, n.vel_m_s, n.att_rad, n.rate_rad_s]
+    if ![n.pos_m, n.vel_m_s, n.att_rad, n.rate_rad_s, n.acc_m_s2]
         .iter()
         .all(|x| x.is_finite() && *x >= 0.0)
     {

@@ -1,6 +1,7 @@
 //! The core flown against the SITL plant, closed loop: every controller tracks without
 //! disturbance, the adaptive controller holds paper-spiral with the shipped weights, and the
-//! adaptation converges to the true disturbance.
+//! adaptation converges to the true disturbance. Thresholds sit near 3× the values measured when
+//! they were set (noted as `measured`), so that a regression shows.
 //!
 //! Run in release (`cargo test --release`): each flight is 15–30 simulated seconds at 500 Hz.
 
@@ -38,16 +39,33 @@ const ALL: [&str; 6] = [
     "adaptive",
 ];
 
+/// Largest whole-flight RMSE (m) per controller on hover and circle-slow: 3× the measured.
+fn tracking_bar(name: &str, sc_name: &str) -> f64 {
+    // measured (cm) hover / circle-slow: pid 0.0 / 0.47, geometric 0.0 / 0.33,
+    // ida-pbc 0.0 / 0.29, geometric-adaptive 0.0 / 0.31, learned 1.32 / 1.37,
+    // adaptive 0.19 / 0.34 (the start-up transient of a from 0 on the learned model's bias).
+    let cm = match (name, sc_name) {
+        ("learned", _) => 4.1,
+        ("adaptive", "hover") => 0.57,
+        (_, "hover") => 0.001,
+        ("pid", _) => 1.4,
+        _ => 1.0,
+    };
+    cm / 100.0
+}
+
 #[test]
 fn every_controller_tracks_hover_and_a_slow_circle_without_disturbance() {
     for sc_name in ["hover", "circle-slow"] {
         let sc = scenario(sc_name);
         for name in ALL {
             let r = fly(name, &sc);
+            println!("{sc_name} {name}: {:.4} cm", 100.0 * r.rmse_pos_m);
             assert!(!r.crashed, "{name} crashed on {sc_name}");
+            let bar = tracking_bar(name, sc_name);
             assert!(
-                r.rmse_pos_m < 0.02,
-                "{name} on {sc_name}: RMSE {:.4} m ≥ 2 cm",
+                r.rmse_pos_m <= bar,
+                "{name} on {sc_name}: RMSE {:.5} m > {bar} m",
                 r.rmse_pos_m
             );
         }
@@ -55,22 +73,42 @@ fn every_controller_tracks_hover_and_a_slow_circle_without_disturbance() {
 }
 
 #[test]
-fn adaptive_holds_paper_spiral_and_beats_learned_threefold() {
+fn adaptive_holds_paper_spiral_and_beats_learned_eightyfold() {
     let sc = scenario("paper-spiral");
     let adaptive = fly("adaptive", &sc);
     let learned = fly("learned", &sc);
     let a = adaptive.rmse_pos_window_m.expect("window scored");
     assert!(!adaptive.crashed, "adaptive crashed: {adaptive:?}");
-    assert!(a <= 0.03, "adaptive window RMSE {a:.4} m > 3 cm");
-    let l = if learned.crashed {
-        f64::INFINITY
-    } else {
-        learned.rmse_pos_window_m.unwrap_or(f64::INFINITY)
-    };
+    // measured 0.0355 cm (the composite law, `adaptive-composite`: 0.020 cm).
+    assert!(a <= 0.001, "adaptive window RMSE {a:.6} m > 0.1 cm");
+    assert!(!learned.crashed, "learned crashed: {learned:?}");
+    let l = learned.rmse_pos_window_m.expect("window scored");
+    // measured: learned 8.33 cm, 235× worse.
     assert!(
-        3.0 * a <= l,
-        "adaptive {a:.4} m is not 3x better than learned {l:.4} m"
+        80.0 * a <= l,
+        "adaptive {a:.6} m is not 80x better than learned {l:.5} m"
     );
+}
+
+/// The paper's claim: the learned model's features beat hand-chosen ones. It holds with the
+/// paper's gradient law (the default); with the composite law the nominal model (the vehicle's
+/// true constants) predicts the measured force better and wins instead (see the README).
+#[test]
+fn adaptive_beats_geometric_adaptive_with_the_paper_law() {
+    for (sc_name, margin) in [("paper-spiral", 1.3), ("paper-spiral-realistic", 1.03)] {
+        let sc = scenario(sc_name);
+        let a = fly("adaptive-gradient", &sc);
+        let g = fly("geometric-adaptive-gradient", &sc);
+        let (a, g) = (
+            a.rmse_pos_window_m.expect("scored"),
+            g.rmse_pos_window_m.expect("scored"),
+        );
+        // measured: paper-spiral 0.0355 vs 0.0587 cm (1.65×); realistic 0.184 vs 0.200 (1.09×).
+        assert!(
+            margin * a <= g,
+            "{sc_name}: adaptive {a:.6} m vs geometric-adaptive {g:.6} m"
+        );
+    }
 }
 
 #[test]
@@ -80,13 +118,29 @@ fn crashes_are_reported_not_silent() {
     for name in ALL {
         let r = fly(name, &sc);
         let flew_whole = (r.duration_s - r.planned_duration_s).abs() < 1e-6;
-        assert_eq!(r.crashed, r.crash_time_s.is_some(), "{name}");
-        assert!(
-            r.crashed || (flew_whole && r.max_err_m <= eval::CRASH_ERR_M),
-            "{name}: not flagged as crashed but the flight ended early or diverged: {r:?}"
-        );
-        if r.crashed {
-            assert!(r.duration_s < r.planned_duration_s, "{name}");
+        if name == "pid" {
+            // measured: crashes at 0.53 s, rolled over into the ground (z < 0).
+            let t = r.crash_time_s.expect("the DSL PID crashes on paper-spiral");
+            assert!(r.crashed && t < 1.5, "pid: {r:?}");
+            assert!(
+                (r.duration_s - t).abs() < 1e-9,
+                "pid stopped at the crash: {r:?}"
+            );
+            assert!(r.rmse_pos_window_m.is_none(), "pid scored after its crash");
+            let mut ctrl = flight::by_name(name, &sc, None).expect("pid exists");
+            let log = eval::fly(&sc, ctrl.as_mut());
+            let z = log.p_m.last().map(|p| p[2]).unwrap_or(f64::NAN);
+            let e = log.err_m.last().copied().unwrap_or(f64::NAN);
+            assert!(
+                z < 0.0 || e > eval::CRASH_ERR_M,
+                "pid flagged as crashed at z = {z} m, error {e} m: neither crash condition"
+            );
+        } else {
+            assert!(
+                !r.crashed && r.crash_time_s.is_none() && flew_whole,
+                "{name}: crashed or ended early: {r:?}"
+            );
+            assert!(r.max_err_m <= 0.2, "{name}: max error {} m", r.max_err_m);
         }
     }
 }
@@ -133,8 +187,10 @@ fn adaptation_converges_to_a_constant_wind() {
     );
     let f_nominal = compensated_world_force(&sc, &mut nominal, 5.0);
     let rel = (f_nominal - truth).norm() / truth.norm();
+    println!("geometric-adaptive: {:.3} % off", 100.0 * rel);
+    // measured 0.45 %.
     assert!(
-        rel < 0.10,
+        rel < REL_NOMINAL,
         "geometric-adaptive: compensated force {f_nominal:?} N vs wind force {truth:?} N ({:.1} % off)",
         100.0 * rel
     );
@@ -148,8 +204,10 @@ fn adaptation_converges_to_a_constant_wind() {
     let g_f = f64::from(learned.inner().model().terms(&hover).gain[(2, 0)]);
     let expected = nalgebra::Vector3::new(truth.x, truth.y, (1.0 - g_f) * 0.027 * 9.8);
     let rel = (f_learned - expected).norm() / truth.norm();
+    println!("adaptive: {:.3} % off", 100.0 * rel);
+    // measured 2.6 %.
     assert!(
-        rel < 0.10,
+        rel < REL_LEARNED,
         "adaptive: compensated force {f_learned:?} N vs wind force + g bias {expected:?} N \
          ({:.1} % off)",
         100.0 * rel
@@ -164,5 +222,9 @@ fn adaptive_holds_paper_spiral_on_a_less_ideal_plant() {
     let r = fly("adaptive", &sc);
     assert!(!r.crashed, "{r:?}");
     let e = r.rmse_pos_window_m.expect("window scored");
-    assert!(e < 0.01, "adaptive on the realistic plant: {e:.4} m");
+    // measured 0.184 cm (the composite law: 0.047 cm).
+    assert!(e < 0.0055, "adaptive on the realistic plant: {e:.5} m");
 }
+
+const REL_NOMINAL: f64 = 0.0135;
+const REL_LEARNED: f64 = 0.078;

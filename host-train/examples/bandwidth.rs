@@ -1,0 +1,32 @@
+//! The adaptation's bandwidth (issue 13): amplitude ratio and phase lag of the compensated
+//! specific force R (W a)_v / m against a sinusoidal wind of 0.5 m/s² along x, hovering, for
+//! both adaptation laws on both adaptive controllers.
+//!
+//! `cargo run --release -p host-train --example bandwidth`
+
+use hamflight::model::{HamiltonianModel, NominalModel};
+use hamflight::AdaptationLaw;
+use host_train::estimator::{self, FREQUENCIES_HZ};
+use host_train::flight::{self, CoreController};
+
+fn row<M: HamiltonianModel + Clone>(name: &str, model: M) -> anyhow::Result<()> {
+    for law in [AdaptationLaw::Gradient, AdaptationLaw::Composite] {
+        let mut ctrl = CoreController::new(name, model.clone(), flight::gains_with(law));
+        let mut cells = Vec::new();
+        for f in FREQUENCIES_HZ {
+            let p = estimator::measure(&mut ctrl, f)?;
+            cells.push(format!("{:.2} / {:.0}°", p.amplitude_ratio, p.lag_deg));
+        }
+        println!("| {name} | {law:?} | {} |", cells.join(" | "));
+    }
+    Ok(())
+}
+
+fn main() -> anyhow::Result<()> {
+    println!("| controller | law | 0.25 Hz | 0.5 Hz | 1 Hz | 2 Hz |");
+    println!("| --- | --- | --- | --- | --- | --- |");
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../weights/default.hfw");
+    row("adaptive", flight::load_learned(&weights)?)?;
+    row("geometric-adaptive", NominalModel::default())?;
+    Ok(())
+}

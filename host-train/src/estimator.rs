@@ -1,0 +1,156 @@
+//! How fast the adaptation follows a changing disturbance: the amplitude ratio and phase lag of
+//! the compensated specific force R (W a)_v / m against a sinusoidal wind, hovering (issue 13's
+//! bandwidth measurement).
+
+use anyhow::Result;
+use hamflight::model::HamiltonianModel;
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::controller::Controller;
+use crate::flight::CoreController;
+use crate::plant::PlantState;
+use crate::scenario::Scenario;
+
+/// The wind amplitude of the measurement (m/s², along world x).
+pub const AMPLITUDE_M_S2: f64 = 0.5;
+/// The time before the fit starts (s): the estimate's start-up transient.
+pub const SETTLE_S: f64 = 4.0;
+/// The frequencies of issue 13's table (Hz).
+pub const FREQUENCIES_HZ: [f64; 4] = [0.25, 0.5, 1.0, 2.0];
+
+/// One point of the estimator's frequency response.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BandwidthPoint {
+    /// Wind frequency (Hz).
+    pub frequency_hz: f64,
+    /// |estimate| / |wind| at that frequency.
+    pub amplitude_ratio: f64,
+    /// Phase lag of the estimate behind the wind (degrees; positive = behind).
+    pub lag_deg: f64,
+}
+
+/// The compensated disturbance as a world-frame specific force, R (W a)_v / m (m/s²).
+pub fn compensated_specific_force<M: HamiltonianModel>(
+    ctrl: &CoreController<M>,
+    state: &PlantState,
+) -> Vector3<f64> {
+    let s: hamflight::State = state.into();
+    let terms = ctrl.inner().model().terms(&s);
+    let wa = terms.features * ctrl.inner().estimate();
+    let f = Vector3::new(wa[0], wa[1], wa[2]).cast::<f64>() / f64::from(terms.mass_kg);
+    state.rot * f
+}
+
+/// The hover scenario with wind AMPLITUDE sin(2π f t) along x, long enough for the fit.
+pub fn sine_wind_scenario(frequency_hz: f64) -> Result<Scenario> {
+    let periods = (4.0 * frequency_hz).ceil().max(4.0);
+    let duration = SETTLE_S + periods / frequency_hz;
+    let toml = format!(
+        "duration_s = {duration}\n[trajectory]\nkind = \"hover\"\nposition_m = [0.0, 0.0, 1.0]\n\
+         [[disturbance.wind_sines]]\namplitude_m_s2 = [{AMPLITUDE_M_S2}, 0.0, 0.0]\n\
+         frequency_hz = {frequency_hz}\n"
+    );
+    Scenario::from_toml_str(&toml, "<bandwidth>", "bandwidth")
+}
+
+/// Flies `sc` with `ctrl` (plant accelerometer fed) and returns per tick (t, true wind, estimate).
+pub fn track_disturbance<M: HamiltonianModel>(
+    sc: &Scenario,
+    ctrl: &mut CoreController<M>,
+) -> Vec<(f64, Vector3<f64>, Vector3<f64>)> {
+    ctrl.reset();
+    let mut plant = sc.plant();
+    let mut rng = ChaCha8Rng::seed_from_u64(sc.spec.seed);
+    let dt = sc.control_dt_s();
+    let nsub = sc.physics_substeps();
+    let n = (sc.spec.duration_s / dt).round() as usize;
+    let mut out = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = k as f64 * dt;
+        plant.set_t_s(t);
+        let meas = plant.measure(&mut rng);
+        let acc = plant.measure_accelerometer(&mut rng);
+        let cmd = ctrl.step_measured(t, &meas, Some(&acc), &sc.reference(t), dt);
+        out.push((
+            t,
+            plant.wind_at(t),
+            compensated_specific_force(ctrl, plant.state()),
+        ));
+        for _ in 0..nsub {
+            plant.step(cmd, dt / nsub as f64);
+        }
+    }
+    out
+}
+
+/// Least-squares fit of y ≈ c + a cos ωt + b sin ωt; returns (a, b).
+fn fit(samples: &[(f64, f64)], w: f64) -> (f64, f64) {
+    // Normal equations of the 3-parameter model.
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    let mut r = nalgebra::Vector3::<f64>::zeros();
+    for (t, y) in samples {
+        let x = nalgebra::Vector3::new(1.0, (w * t).cos(), (w * t).sin());
+        m += x * x.transpose();
+        r += x * *y;
+    }
+    let p = m.try_inverse().map(|i| i * r).unwrap_or_default();
+    (p[1], p[2])
+}
+
+/// The frequency response of `ctrl`'s estimate at `frequency_hz`.
+pub fn measure<M: HamiltonianModel>(
+    ctrl: &mut CoreController<M>,
+    frequency_hz: f64,
+) -> Result<BandwidthPoint> {
+    let sc = sine_wind_scenario(frequency_hz)?;
+    let trace = track_disturbance(&sc, ctrl);
+    let w = core::f64::consts::TAU * frequency_hz;
+    let est: Vec<(f64, f64)> = trace
+        .iter()
+        .filter(|(t, _, _)| *t >= SETTLE_S)
+        .map(|(t, _, e)| (*t, e.x))
+        .collect();
+    let truth: Vec<(f64, f64)> = trace
+        .iter()
+        .filter(|(t, _, _)| *t >= SETTLE_S)
+        .map(|(t, d, _)| (*t, d.x))
+        .collect();
+    let (ea, eb) = fit(&est, w);
+    let (ta, tb) = fit(&truth, w);
+    let amp = |a: f64, b: f64| (a * a + b * b).sqrt();
+    // y = A cos + B sin = amp sin(ωt + φ) with φ = atan2(A, B).
+    let lag = (ta.atan2(tb) - ea.atan2(eb)).to_degrees();
+    let lag = (lag + 180.0).rem_euclid(360.0) - 180.0;
+    Ok(BandwidthPoint {
+        frequency_hz,
+        amplitude_ratio: amp(ea, eb) / amp(ta, tb).max(1e-12),
+        lag_deg: lag,
+    })
+}
+
+/// The standard deviation of each component of the logged estimate a over t ≥ `from_s` (a's
+/// units: m/s² for the force columns, 1e-3 N·m for the torque ones): how much the estimate
+/// moves, chatter included, once converged.
+pub fn estimate_std(log: &crate::eval::FlightLog, from_s: f64) -> Vec<f64> {
+    let rows: Vec<&Vec<f64>> = log
+        .t_s
+        .iter()
+        .zip(&log.adaptation)
+        .filter(|(t, a)| **t >= from_s && !a.is_empty())
+        .map(|(_, a)| a)
+        .collect();
+    let Some(first) = rows.first() else {
+        return Vec::new();
+    };
+    let n = rows.len() as f64;
+    (0..first.len())
+        .map(|i| {
+            let xs = rows.iter().filter_map(|r| r.get(i).copied());
+            let mean = xs.clone().sum::<f64>() / n;
+            (xs.map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt()
+        })
+        .collect()
+}

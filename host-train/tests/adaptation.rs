@@ -1,0 +1,286 @@
+//! The adaptation laws against disturbances that change (issue 13) and against windup and wrong
+//! features (issue 11): the composite law's bars, each next to the paper's gradient law flown on
+//! the same scenario. Thresholds sit near 1.5× the values measured when they were set (in the
+//! comments: `measured`).
+//!
+//! Run in release: `cargo test --release -p host-train --test adaptation`.
+
+use hamflight::model::{HamiltonianModel, ModelTerms, NominalModel, State};
+use hamflight::{AdaptationLaw, Gains};
+use host_train::estimator;
+use host_train::eval::{self, Report};
+use host_train::events::EventMetrics;
+use host_train::flight::{self, CoreController};
+use host_train::{Controller, PlantState, Scenario, TrajectoryPoint};
+use std::path::{Path, PathBuf};
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+fn scenario(name: &str) -> Scenario {
+    Scenario::load(repo(&format!("scenarios/{name}.toml"))).expect("scenario loads")
+}
+
+fn fly(name: &str, sc: &Scenario) -> Report {
+    let weights = repo(flight::DEFAULT_WEIGHTS);
+    let mut ctrl = flight::by_name(name, sc, Some(&weights)).expect("controller exists");
+    let log = eval::fly(sc, ctrl.as_mut());
+    let r = Report::from_flight(&log, sc, None);
+    assert!(!r.crashed, "{name} crashed on {}: {r:?}", sc.name);
+    r
+}
+
+fn window(r: &Report) -> f64 {
+    r.rmse_pos_window_m.expect("window scored")
+}
+
+fn event(r: &Report, k: usize) -> &EventMetrics {
+    r.events.get(k).expect("event scored")
+}
+
+#[test]
+fn the_paper_law_stays_the_default() {
+    assert_eq!(Gains::default().law, AdaptationLaw::Gradient);
+    assert_eq!(Gains::paper().law, AdaptationLaw::Gradient);
+    assert_eq!(
+        flight::gains_with(AdaptationLaw::Composite).law,
+        AdaptationLaw::Composite
+    );
+}
+
+#[test]
+fn gust_spiral_composite_three_times_better_than_the_paper_law() {
+    let sc = scenario("gust-spiral");
+    let c = window(&fly("adaptive-composite", &sc)); // measured 0.479 cm
+    let g = window(&fly("adaptive-gradient", &sc)); // measured 2.38 cm
+    assert!(c <= 0.0072, "composite {c:.5} m");
+    assert!(
+        3.0 * c <= g,
+        "composite {c:.5} m not 3x better than gradient {g:.5} m"
+    );
+}
+
+#[test]
+fn rotor_loss_mid_recovers_within_a_second() {
+    let sc = scenario("rotor-loss-mid");
+    let c = fly("adaptive-composite", &sc);
+    let g = fly("adaptive-gradient", &sc);
+    let (ce, ge) = (event(&c, 0), event(&g, 0));
+    assert_eq!(ce.t_s, 12.0);
+    // measured: composite peak 2.26 cm, recovery 0.73 s, RMSE 12–17 s 0.64 cm;
+    // gradient 6.56 cm, 2.57 s, 2.47 cm. Bars: recovery ≤ 1 s, peak ≤ 50 % of the gradient's.
+    let rec = ce.recovery_s.expect("composite recovers");
+    assert!(rec <= 1.0, "recovery {rec} s");
+    assert!(ce.peak_err_m <= 0.5 * ge.peak_err_m, "{ce:?} vs {ge:?}");
+    assert!(ce.rmse_after_m.expect("scored") <= 0.0095, "{ce:?}");
+    assert!(ge.recovery_s.is_none_or(|r| r > 2.0), "gradient {ge:?}");
+}
+
+#[test]
+fn hover_wind_step_peaks_below_60_percent_of_the_paper_law() {
+    let sc = scenario("hover-wind-step");
+    let c = fly("adaptive-composite", &sc);
+    let g = fly("adaptive-gradient", &sc);
+    assert_eq!(c.events.len(), 2, "{:?}", c.events);
+    for k in 0..2 {
+        let (ce, ge) = (event(&c, k), event(&g, k));
+        // measured: composite 0.91 cm, never above 1 cm after; gradient 4.26 cm, 1.70 s.
+        assert!(ce.peak_err_m <= 0.014, "step {k}: {ce:?}");
+        assert!(
+            ce.peak_err_m <= 0.6 * ge.peak_err_m,
+            "step {k}: {ce:?} vs {ge:?}"
+        );
+        let settle = ce.recovery_s.expect("composite settles");
+        assert!(settle <= 0.5, "step {k}: settling {settle} s");
+        assert!(ge.recovery_s.expect("gradient settles") > settle);
+    }
+}
+
+#[test]
+fn composite_bandwidth_at_1_hz() {
+    let weights = repo(flight::DEFAULT_WEIGHTS);
+    let model = flight::load_learned(&weights).expect("weights load");
+    let mut c = CoreController::new("c", model, flight::gains_with(AdaptationLaw::Composite));
+    let mut g = CoreController::new("g", model, flight::gains_with(AdaptationLaw::Gradient));
+    let pc = estimator::measure(&mut c, 1.0).expect("measured");
+    let pg = estimator::measure(&mut g, 1.0).expect("measured");
+    // measured: composite 0.95 / 16°, gradient 1.06 / 87°. Bar: ≥ 0.9 and ≤ 45°.
+    assert!(
+        (0.9..=1.15).contains(&pc.amplitude_ratio),
+        "composite {pc:?}"
+    );
+    assert!(pc.lag_deg >= 0.0 && pc.lag_deg <= 24.0, "composite {pc:?}");
+    assert!(pg.lag_deg > 60.0, "gradient {pg:?}");
+}
+
+#[test]
+fn composite_no_worse_than_the_paper_law_on_the_paper_scenarios() {
+    // Today's figures with the gradient law: 0.035 / 0.18 cm.
+    for (name, c_max, today) in [
+        ("paper-spiral", 0.0003, 0.00036),          // measured 0.0194 cm
+        ("paper-spiral-realistic", 0.0007, 0.0019), // measured 0.047 cm
+    ] {
+        let sc = scenario(name);
+        let c = window(&fly("adaptive-composite", &sc));
+        let g = window(&fly("adaptive-gradient", &sc));
+        assert!(c <= c_max, "{name}: composite {c:.6} m");
+        assert!(
+            c <= today && c < g,
+            "{name}: composite {c:.6} m, gradient {g:.6} m"
+        );
+    }
+}
+
+#[test]
+fn no_windup_on_the_step() {
+    let sc = scenario("step");
+    let c = window(&fly("adaptive-composite", &sc)); // measured 0.016 cm (gradient: 0.51 cm)
+    assert!(
+        c <= 0.0005,
+        "adaptive on step: {c:.6} m over t ≥ 5 s (bar 0.05 cm)"
+    );
+    let g = window(&fly("geometric-adaptive-composite", &sc)); // measured 0.011 (gradient 0.69)
+    assert!(g <= 0.0005, "geometric-adaptive on step: {g:.6} m");
+}
+
+/// The composite estimate does not chatter on the noisy plant: its spread over t ≥ 10 s stays
+/// near the gradient law's (which the noise barely moves).
+#[test]
+fn composite_estimate_is_calm_under_noise() {
+    let sc = scenario("paper-spiral-realistic");
+    let weights = repo(flight::DEFAULT_WEIGHTS);
+    let model = flight::load_learned(&weights).expect("weights load");
+    let mut stds = Vec::new();
+    for law in [AdaptationLaw::Composite, AdaptationLaw::Gradient] {
+        let mut c = CoreController::new("a", model, flight::gains_with(law));
+        let log = eval::fly(&sc, &mut c);
+        let s = estimator::estimate_std(&log, 10.0);
+        assert_eq!(s.len(), 6);
+        stds.push(s);
+    }
+    let (c, g) = (&stds[0], &stds[1]);
+    println!("a std, composite {c:.4?}\na std, gradient  {g:.4?}");
+    let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
+    // measured: composite force columns ≤ 0.056 m/s², torque ≤ 0.0042 (1e-3 N·m);
+    // gradient 0.048 and 0.0033. Thresholds 1.5× the composite's.
+    assert!(max(&c[..3]) <= CALM_FORCE, "force std {c:?}");
+    assert!(max(&c[3..]) <= CALM_TORQUE, "torque std {c:?}");
+}
+
+const CALM_FORCE: f64 = 0.084;
+const CALM_TORQUE: f64 = 0.0063;
+
+/// A model whose features are wrong on purpose: scaled, or with a constant bias added.
+#[derive(Clone, Copy)]
+struct WrongFeatures<M> {
+    inner: M,
+    scale: f32,
+    bias: f32,
+}
+
+impl<M: HamiltonianModel> HamiltonianModel for WrongFeatures<M> {
+    fn terms(&self, state: &State) -> ModelTerms {
+        let mut t = self.inner.terms(state);
+        t.features *= self.scale;
+        t.features.iter_mut().for_each(|w| *w += self.bias);
+        t
+    }
+}
+
+#[test]
+fn wrong_features_keep_the_estimate_bounded_and_the_vehicle_up() {
+    let sc = scenario("paper-spiral");
+    let nominal = NominalModel::default();
+    let cases = [(5.0, 0.0), (0.2, 0.0), (1.0, 0.01), (1.0, -0.01)];
+    for law in [AdaptationLaw::Composite, AdaptationLaw::Gradient] {
+        for (scale, bias) in cases {
+            if law == AdaptationLaw::Gradient && scale > 1.0 {
+                // Not asserted: the paper's law has no answer to features 5× too large. Its
+                // rate grows with |W|², 25× here, and the tracking-error loop loses its damping
+                // (it crashes after 1.3 s on paper-spiral). Composite, the default, holds it.
+                continue;
+            }
+            let model = WrongFeatures {
+                inner: nominal,
+                scale,
+                bias,
+            };
+            let gains = flight::gains_with(law);
+            let mut c = CoreController::new("wrong", model, gains);
+            let log = eval::fly(&sc, &mut c);
+            let r = Report::from_log(&log, None);
+            assert!(!r.crashed, "{law:?} ×{scale} +{bias}: crashed {r:?}");
+            let worst = log
+                .adaptation
+                .iter()
+                .map(|a| a.iter().map(|x| x * x).sum::<f64>().sqrt())
+                .fold(0.0, f64::max);
+            assert!(
+                worst <= f64::from(gains.rates.a_max) * (1.0 + 1e-5),
+                "{law:?} ×{scale} +{bias}: ‖a‖ reached {worst}"
+            );
+            println!(
+                "{law:?} ×{scale} +{bias}: window {:.4} cm, max {:.3} cm, max ‖a‖ {worst:.3}",
+                100.0 * window(&r),
+                100.0 * r.max_err_m
+            );
+            // measured worst: composite 0.94 cm (+0.01), gradient 4.7 cm (×0.2).
+            let bar = if law == AdaptationLaw::Composite {
+                0.015
+            } else {
+                0.07
+            };
+            assert!(window(&r) <= bar, "{law:?} ×{scale} +{bias}: {r:?}");
+        }
+    }
+}
+
+/// Without an accelerometer the composite law differences the velocity; it still holds the
+/// paper-spiral (the firmware's case).
+#[test]
+fn composite_without_an_accelerometer() {
+    struct NoAccelerometer<C>(C);
+    impl<C: Controller> Controller for NoAccelerometer<C> {
+        fn name(&self) -> &str {
+            self.0.name()
+        }
+        fn reset(&mut self) {
+            self.0.reset();
+        }
+        fn step(&mut self, t: f64, s: &PlantState, r: &TrajectoryPoint, dt: f64) -> [f64; 4] {
+            self.0.step(t, s, r, dt)
+        }
+    }
+    let weights = repo(flight::DEFAULT_WEIGHTS);
+    let model = flight::load_learned(&weights).expect("weights load");
+    for name in ["paper-spiral", "rotor-loss-mid"] {
+        let sc = scenario(name);
+        let c = CoreController::new("c", model, flight::gains_with(AdaptationLaw::Composite));
+        let mut c = NoAccelerometer(c);
+        let log = eval::fly(&sc, &mut c);
+        let r = Report::from_flight(&log, &sc, None);
+        assert!(!r.crashed, "{name}: {r:?}");
+        // measured: paper-spiral 0.020 cm; rotor-loss-mid 0.37 cm.
+        let bar = if name == "paper-spiral" {
+            0.0003
+        } else {
+            0.0055
+        };
+        assert!(window(&r) <= bar, "{name}: {:.6} m", window(&r));
+    }
+}
+
+/// RotorPy's Crazyflie has a 72 ms motor lag: the composite law's assumed lag (50 ms) keeps it
+/// stable there (with none assumed it crashes in 0.8 s).
+#[test]
+fn composite_holds_a_72_ms_motor_lag() {
+    let mut sc = scenario("paper-spiral-realistic");
+    sc.spec.effects.motor_tau_s = 0.072;
+    let c = window(&fly("adaptive-composite", &sc)); // measured 0.0475 cm
+    let g = window(&fly("adaptive-gradient", &sc)); // measured 0.184 cm
+    assert!(
+        c <= 0.0007 && c < g,
+        "composite {c:.6} m, gradient {g:.6} m"
+    );
+}
