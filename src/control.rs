@@ -160,10 +160,17 @@ pub const ROTATION_TOLERANCE: f32 = 1e-3;
 /// True if `r` is a rotation to [`ROTATION_TOLERANCE`]: ‖RᵀR − I‖_F ≤ tolerance and det R > 0.
 /// False for non-finite entries.
 pub fn is_rotation(r: &Matrix3<f32>) -> bool {
-    let d = r.transpose() * r - Matrix3::identity();
-    let dev2 = d.iter().map(|x| x * x).sum::<f32>();
+    // RᵀR is symmetric: its entries are the columns' dot products, six of them, so
+    // ‖RᵀR − I‖²_F = Σᵢ (cᵢ·cᵢ − 1)² + 2 Σᵢ<ⱼ (cᵢ·cⱼ)², and det R = c₀ · (c₁ × c₂).
+    let (c0, c1, c2) = (r.column(0), r.column(1), r.column(2));
+    let d00 = c0.dot(&c0) - 1.0;
+    let d11 = c1.dot(&c1) - 1.0;
+    let d22 = c2.dot(&c2) - 1.0;
+    let (d01, d02, d12) = (c0.dot(&c1), c0.dot(&c2), c1.dot(&c2));
+    let dev2 = d00 * d00 + d11 * d11 + d22 * d22 + 2.0 * (d01 * d01 + d02 * d02 + d12 * d12);
+    let det = c0.dot(&c1.cross(&c2));
     // The comparisons are false for NaN: a non-finite R is refused.
-    dev2 <= ROTATION_TOLERANCE * ROTATION_TOLERANCE && r.determinant() > 0.0
+    dev2 <= ROTATION_TOLERANCE * ROTATION_TOLERANCE && det > 0.0
 }
 
 /// What one control step produces.

@@ -154,3 +154,121 @@ pub fn estimate_std(log: &crate::eval::FlightLog, from_s: f64) -> Vec<f64> {
         })
         .collect()
 }
+
+/// One law's estimate against the true disturbance over a flight.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrackedLaw {
+    /// The adaptation law (`Gradient` or `Composite`).
+    pub law: String,
+    /// RMS over t ≥ 5 s of estimate − true wind, world x and y (m/s²).
+    pub rms_error_m_s2: f64,
+    /// Per tick: t (s), true wind (m/s², world), compensated specific force R (W a)_v / m.
+    #[serde(skip)]
+    pub trace: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
+}
+
+/// `host-train track`: both laws on one scenario, estimate against truth.
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrackArgs {
+    /// Scenario TOML file (one with a wind: e.g. scenarios/gust-spiral.toml).
+    #[arg(long, value_name = "FILE")]
+    pub scenario: std::path::PathBuf,
+    /// `adaptive` (learned model, `--weights`) or `geometric-adaptive` (nominal model).
+    #[arg(long, value_name = "NAME", default_value = "adaptive")]
+    pub controller: String,
+    /// Weight blob for `adaptive`.
+    #[arg(long, value_name = "FILE", default_value = crate::flight::DEFAULT_WEIGHTS)]
+    pub weights: std::path::PathBuf,
+    /// Output directory for disturbance.svg and track.json (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: std::path::PathBuf,
+    /// Also measure the estimator's frequency response at 0.25, 0.5, 1 and 2 Hz (hovering,
+    /// sinusoidal wind): bandwidth.svg and the points in track.json (about 8 flights a law).
+    #[arg(long)]
+    pub bandwidth: bool,
+}
+
+/// What `host-train track` measured.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrackReport {
+    /// Scenario name.
+    pub scenario: String,
+    /// Controller name.
+    pub controller: String,
+    /// Per law: the estimate's RMS error.
+    pub laws: Vec<TrackedLaw>,
+    /// Per law: the frequency response (empty without `--bandwidth`).
+    pub bandwidth: Vec<(String, Vec<BandwidthPoint>)>,
+}
+
+fn track_both<M: HamiltonianModel + Clone>(
+    args: &TrackArgs,
+    sc: &Scenario,
+    model: M,
+) -> Result<TrackReport> {
+    use hamflight::AdaptationLaw;
+    let mut laws = Vec::new();
+    let mut bandwidth = Vec::new();
+    for law in [AdaptationLaw::Gradient, AdaptationLaw::Composite] {
+        let gains = crate::flight::gains_with(law);
+        let mut ctrl = CoreController::new(&args.controller, model.clone(), gains);
+        let trace = track_disturbance(sc, &mut ctrl);
+        let errs: Vec<f64> = trace
+            .iter()
+            .filter(|(t, _, _)| *t >= crate::eval::WINDOW_START_S)
+            .map(|(_, d, e)| (d.x - e.x).powi(2) + (d.y - e.y).powi(2))
+            .collect();
+        let rms = (errs.iter().sum::<f64>() / errs.len().max(1) as f64).sqrt();
+        laws.push(TrackedLaw {
+            law: format!("{law:?}"),
+            rms_error_m_s2: rms,
+            trace,
+        });
+        if args.bandwidth {
+            let mut pts = Vec::new();
+            for f in FREQUENCIES_HZ {
+                pts.push(measure(&mut ctrl, f)?);
+            }
+            bandwidth.push((format!("{law:?}"), pts));
+        }
+    }
+    Ok(TrackReport {
+        scenario: sc.name.clone(),
+        controller: args.controller.clone(),
+        laws,
+        bandwidth,
+    })
+}
+
+/// Run `host-train track`: fly `args.scenario` with both adaptation laws, write
+/// `disturbance.svg` (the estimate against the true wind), `track.json` and, with
+/// `--bandwidth`, `bandwidth.svg`.
+pub fn run_track(args: &TrackArgs) -> Result<TrackReport> {
+    let sc = Scenario::load(&args.scenario)?;
+    let report = match args.controller.as_str() {
+        "adaptive" => track_both(args, &sc, crate::flight::load_learned(&args.weights)?)?,
+        "geometric-adaptive" => track_both(args, &sc, hamflight::model::NominalModel::default())?,
+        other => anyhow::bail!(
+            "--controller {other}: track flies `adaptive` or `geometric-adaptive` (both laws each)"
+        ),
+    };
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", args.out.display()))?;
+    let series: Vec<(&str, &[(f64, Vector3<f64>, Vector3<f64>)])> = report
+        .laws
+        .iter()
+        .map(|l| (l.law.as_str(), l.trace.as_slice()))
+        .collect();
+    let title = format!("{}, {}", report.scenario, report.controller);
+    crate::plot::disturbance_svg(&title, &series, &args.out.join("disturbance.svg"))?;
+    if !report.bandwidth.is_empty() {
+        let pts: Vec<(&str, &[BandwidthPoint])> = report
+            .bandwidth
+            .iter()
+            .map(|(l, p)| (l.as_str(), p.as_slice()))
+            .collect();
+        crate::plot::bandwidth_svg(&report.controller, &pts, &args.out.join("bandwidth.svg"))?;
+    }
+    crate::eval::write_json_atomic(&args.out.join("track.json"), &report)?;
+    Ok(report)
+}

@@ -25,6 +25,10 @@ enum Command {
     Train(host_train::train::TrainArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),
+    /// Fly a scenario with both adaptation laws (the paper's gradient law and the composite law)
+    /// and plot each estimate against the true wind: DIR/disturbance.svg, DIR/track.json; with
+    /// --bandwidth also the estimator's frequency response, DIR/bandwidth.svg.
+    Track(host_train::estimator::TrackArgs),
     /// Drive a core controller from an external simulator: one JSON request per line on stdin
     /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
     /// thrust, torques, a, faults). See the README for the protocol.
@@ -96,6 +100,24 @@ fn run(cli: Cli) -> Result<()> {
         Command::Eval(args) => {
             let r = host_train::eval::run(&args)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
+        }
+        Command::Track(args) => {
+            let r = host_train::estimator::run_track(&args)?;
+            for l in &r.laws {
+                println!(
+                    "{} / {} law: estimate − true wind, RMS over t ≥ 5 s: {:.3} m/s²",
+                    r.controller, l.law, l.rms_error_m_s2
+                );
+            }
+            for (law, pts) in &r.bandwidth {
+                for p in pts {
+                    println!(
+                        "{law} law at {:.2} Hz: amplitude ratio {:.2}, lag {:.0}°",
+                        p.frequency_hz, p.amplitude_ratio, p.lag_deg
+                    );
+                }
+            }
+            println!("figures and track.json in {}", args.out.display());
         }
         Command::Bridge(args) => host_train::bridge::run(&args)?,
         Command::Demo(args) => {

@@ -270,3 +270,147 @@ pub fn adaptation_svg(label: &str, log: &FlightLog, path: &Path) -> Result<()> {
     }
     write_atomic(path, buf.as_bytes())
 }
+
+/// The adaptation's estimate against the true disturbance: world x and y of the compensated
+/// specific force R (W a)_v / m and of the wind (m/s²) against time, one line per law.
+pub fn disturbance_svg(
+    title: &str,
+    series: &[(
+        &str,
+        &[(f64, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)],
+    )],
+    path: &Path,
+) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1000, 650)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let root = root
+            .titled(
+                &format!("{title}: disturbance estimate against the true wind"),
+                ("sans-serif", 20),
+            )
+            .map_err(pe)?;
+        let t_max = series
+            .iter()
+            .flat_map(|(_, s)| s.last().map(|p| p.0))
+            .fold(0.1, f64::max);
+        for (axis, area) in root.split_evenly((2, 1)).iter().enumerate() {
+            let (lo, hi) = bounds(
+                series
+                    .iter()
+                    .flat_map(|(_, s)| s.iter().flat_map(move |(_, d, e)| [d[axis], e[axis]])),
+            );
+            let mut ch = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..t_max, lo..hi)
+                .map_err(pe)?;
+            ch.configure_mesh()
+                .x_desc("t (s)")
+                .y_desc(["world x (m/s²)", "world y (m/s²)"][axis])
+                .draw()
+                .map_err(pe)?;
+            // At most ~3,000 points a line: the figure stays small and the lines unchanged.
+            let every = |s: &[(f64, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)]| {
+                (s.len() / 3000).max(1)
+            };
+            if let Some((_, s)) = series.first() {
+                ch.draw_series(LineSeries::new(
+                    s.iter().step_by(every(s)).map(|(t, d, _)| (*t, d[axis])),
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(pe)?
+                .label("true wind")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            }
+            for (i, (name, s)) in series.iter().enumerate() {
+                let c = PALETTE[i % PALETTE.len()];
+                ch.draw_series(LineSeries::new(
+                    s.iter().step_by(every(s)).map(|(t, _, e)| (*t, e[axis])),
+                    c,
+                ))
+                .map_err(pe)?
+                .label(format!("estimate, {name} law"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+            }
+            ch.configure_series_labels()
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.8))
+                .draw()
+                .map_err(pe)?;
+        }
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
+
+/// The estimator's frequency response, one line per law: amplitude ratio and phase lag of the
+/// estimate against a sinusoidal wind.
+pub fn bandwidth_svg(
+    controller: &str,
+    series: &[(&str, &[crate::estimator::BandwidthPoint])],
+    path: &Path,
+) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (900, 600)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let root = root
+            .titled(
+                &format!("{controller}: adaptation bandwidth (hover, sinusoidal wind)"),
+                ("sans-serif", 20),
+            )
+            .map_err(pe)?;
+        let f_max = series
+            .iter()
+            .flat_map(|(_, s)| s.iter().map(|p| p.frequency_hz))
+            .fold(0.5, f64::max)
+            * 1.1;
+        let panels = root.split_evenly((2, 1));
+        for (k, area) in panels.iter().enumerate() {
+            let val = |p: &crate::estimator::BandwidthPoint| {
+                if k == 0 {
+                    p.amplitude_ratio
+                } else {
+                    p.lag_deg
+                }
+            };
+            let (lo, hi) = bounds(series.iter().flat_map(|(_, s)| s.iter().map(val)));
+            let mut ch = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..f_max, lo.min(0.0)..hi)
+                .map_err(pe)?;
+            ch.configure_mesh()
+                .x_desc("wind frequency (Hz)")
+                .y_desc(["amplitude ratio", "phase lag (°)"][k])
+                .draw()
+                .map_err(pe)?;
+            for (i, (name, s)) in series.iter().enumerate() {
+                let c = PALETTE[i % PALETTE.len()];
+                ch.draw_series(LineSeries::new(
+                    s.iter().map(|p| (p.frequency_hz, val(p))),
+                    c.stroke_width(2),
+                ))
+                .map_err(pe)?
+                .label(format!("{name} law"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+                ch.draw_series(
+                    s.iter()
+                        .map(|p| Circle::new((p.frequency_hz, val(p)), 4, c.filled())),
+                )
+                .map_err(pe)?;
+            }
+            ch.configure_series_labels()
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.8))
+                .draw()
+                .map_err(pe)?;
+        }
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}

@@ -36,7 +36,7 @@ extern "C" {
 #define HF_FEATURES 6
 
 /* Bytes of opaque storage a controller needs (the Rust side asserts its state fits). */
-#define HF_CONTROLLER_STORAGE_BYTES 256
+#define HF_CONTROLLER_STORAGE_BYTES 1024
 
 /* ---- Fault and condition flags (hf_output_t.faults, hf_last_faults) ----
  * Any bit of HF_FAULT_MASK means the output is a zero wrench (motors off).
@@ -70,8 +70,8 @@ typedef struct hf_state {
   float v_body_m_s[3];   /* linear velocity v (m/s), BODY frame: v = R^T * (world velocity) */
   float w_body_rad_s[3]; /* angular velocity omega (rad/s), body frame (the gyro) */
   /* Measured specific force (accelerometer) in the body frame (m/s^2): what an IMU at rest
-   * reads is +9.81 along body z. Carried for the composite adaptation law
-   * (FlightController::step_measured); NOT YET USED by hf_step. */
+   * reads is +9.81 along body z. Passed to FlightController::step_measured: the composite
+   * adaptation law uses it (velocity differences when invalid); the default gradient law does not. */
   float specific_force_body_m_s2[3];
   uint8_t specific_force_valid; /* nonzero: specific_force_body_m_s2 holds a measurement */
   uint8_t reserved[3];          /* zero */

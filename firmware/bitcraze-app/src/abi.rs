@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 /// `HF_FEATURES`.
 pub const FEATURES: usize = hamflight::model::FEATURES;
 /// `HF_CONTROLLER_STORAGE_BYTES`.
-pub const CONTROLLER_STORAGE_BYTES: usize = 256;
+pub const CONTROLLER_STORAGE_BYTES: usize = 1024;
 
 /// `HF_FAULT_BAD_STATE`.
 pub const FAULT_BAD_STATE: u32 = 1 << 0;
@@ -59,7 +59,7 @@ pub struct HfState {
     pub v_body_m_s: [f32; 3],
     /// Angular velocity (rad/s, body frame).
     pub w_body_rad_s: [f32; 3],
-    /// Measured specific force (m/s², body frame); carried, not yet used by `hf_step`.
+    /// Measured specific force (m/s², body frame), for the composite adaptation law.
     pub specific_force_body_m_s2: [f32; 3],
     /// Nonzero if `specific_force_body_m_s2` holds a measurement.
     pub specific_force_valid: u8,
@@ -209,6 +209,9 @@ impl HfGains {
         if !(tilt_ok && all.iter().all(|v| v.is_finite() && *v >= 0.0)) {
             return None;
         }
+        // The law, the composite law's tuning and the robust options are not in the C API:
+        // they keep the core's defaults.
+        let defaults = Gains::default();
         Some(Gains {
             k_p: self.k_p,
             k_v: self.k_v,
@@ -221,8 +224,10 @@ impl HfGains {
                 c_r: self.c_r,
                 c_w: self.c_w,
                 a_max: self.a_max,
+                ..defaults.rates
             },
             adapt,
+            ..defaults
         })
     }
 }

@@ -139,7 +139,15 @@ pub unsafe extern "C" fn hf_step(
     let (Some(inner), Some(state), Some(setpoint)) = (inner, state, setpoint) else {
         return abi::FAULT_NOT_INIT;
     };
-    let o = inner.ctl.step(&state.to_core(), &setpoint.to_core(), dt_s);
+    // The accelerometer reaches the composite adaptation law when the shim marks it valid (the
+    // paper's gradient law, the default, does not read it).
+    let meas = hamflight::adapt::Measurement {
+        acc_body_m_s2: (state.specific_force_valid != 0)
+            .then(|| nalgebra::Vector3::from(state.specific_force_body_m_s2)),
+    };
+    let o = inner
+        .ctl
+        .step_measured(&state.to_core(), &setpoint.to_core(), &meas, dt_s);
     let faults = abi::fault_bits(&o.faults);
     if !o.faults.is_fault() {
         out.thrust_n = o.wrench.thrust_n;
