@@ -7,7 +7,7 @@ use crate::link::{
 use crate::motor::{pwm_to_rpm, rpm_to_pwm, Motors};
 use core::convert::Infallible;
 use embedded_hal::pwm::{ErrorType, SetDutyCycle};
-use hamflight::model::NominalModel;
+use hamflight::model::{LearnedModel, ModelWeights, NominalModel};
 use hamflight::{Setpoint, State};
 use nalgebra::Vector3;
 
@@ -160,9 +160,15 @@ fn loop_steps_only_on_fresh_input_and_watchdog_stops_motors() {
     assert!(m.m1.0 > 0);
 }
 
+/// A fresh `static` slot for [`crate::control_loop::load_model`] (leaked: tests only).
+fn slot() -> &'static mut LearnedModel {
+    Box::leak(Box::new(LearnedModel::new(ModelWeights::ZERO)))
+}
+
 #[test]
 fn bad_blob_keeps_motors_off() {
-    let err = crate::control_loop::load_model(b"not a blob").unwrap_err();
+    let slot = slot();
+    let err = crate::control_loop::load_model(b"not a blob", slot).unwrap_err();
     assert_eq!(err, hamflight::blob::BlobError::BadMagic);
     let mut l = ControlLoop::<crate::control_loop::Model>::new(Err(err));
     let mut m = motors();
@@ -173,8 +179,15 @@ fn bad_blob_keeps_motors_off() {
 }
 
 #[test]
-fn embedded_blob_passes_its_checks() {
-    assert!(crate::control_loop::load_model(crate::WEIGHT_BLOB).is_ok());
+fn embedded_blob_passes_its_checks_and_decodes_in_place() {
+    let model = crate::control_loop::load_model(crate::WEIGHT_BLOB, slot());
+    assert!(model.is_ok());
+    // The model flies the slot, which now holds exactly what decoding by value gives.
+    #[cfg(not(hamflight_untrained))]
+    assert_eq!(
+        model.map(|m| m.weights),
+        hamflight::blob::decode(crate::WEIGHT_BLOB)
+    );
 }
 
 #[test]
@@ -186,4 +199,128 @@ fn wire_state_round_trips() {
         w_body_rad_s: Vector3::new(-1.0, 0.5, 2.0),
     };
     assert_eq!(State::from(&WireState::from(&s)), s);
+}
+
+/// An input off the hover point (position, velocity and attitude errors), so that the
+/// adaptation law moves the estimate every step.
+fn off_input(seq: u32) -> Input {
+    let k = seq as f32;
+    let p = Vector3::new(0.0, 0.0, 0.5);
+    Input {
+        seq,
+        state: WireState::from(&State {
+            p_m: p + Vector3::new(0.05 + 0.001 * k, -0.03, 0.02),
+            rot: nalgebra::Rotation3::from_euler_angles(0.05, -0.03, 0.1).into_inner(),
+            v_body_m_s: Vector3::new(0.1, 0.0, -0.05),
+            w_body_rad_s: Vector3::new(0.2, -0.1, 0.05),
+        }),
+        setpoint: WireSetpoint::from(&Setpoint::hover(p, 0.0)),
+    }
+}
+
+/// Feeds `arrivals[k]` (an input or a dropped frame) at tick k into the loop, and steps a
+/// reference controller on the same states with `dt_of(ticks since its last step)`; returns
+/// the loop's and the reference's estimates after each step.
+fn fly_with_drops(
+    arrivals: &[Option<Input>],
+    dt_of: impl Fn(u32) -> f32,
+) -> Vec<([f32; 6], [f32; 6])> {
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let mut out = Vec::new();
+    let mut since: Option<u32> = None;
+    for arrival in arrivals {
+        since = since.map(|n| n + 1);
+        match arrival {
+            Some(input) => {
+                l.on_input(*input);
+                let TickOutcome::Stepped(t) = l.tick(&mut m, &mut NoCost) else {
+                    panic!("a fresh input must step")
+                };
+                let dt_s = dt_of(since.unwrap_or(1));
+                let r = reference.step(
+                    &State::from(&input.state),
+                    &Setpoint::from(&input.setpoint),
+                    dt_s,
+                );
+                assert!(!r.faults.is_fault(), "{:?}", r.faults);
+                since = Some(0);
+                let mut a = [0.0; 6];
+                a.iter_mut().zip(r.a.iter()).for_each(|(d, s)| *d = *s);
+                out.push((t.a, a));
+            }
+            None => assert_eq!(l.tick(&mut m, &mut NoCost), TickOutcome::Idle),
+        }
+    }
+    out
+}
+
+#[test]
+fn adaptation_integrates_the_real_time_across_dropped_frames() {
+    use crate::control_loop::DT_S;
+    // Ticks 0..12 with frames 3, 6, 7 and 9 dropped (gaps of 2 and 3 periods).
+    let dropped = [3, 6, 7, 9];
+    let arrivals: Vec<Option<Input>> = (0..12)
+        .map(|k| (!dropped.contains(&k)).then(|| off_input(k)))
+        .collect();
+    // The loop agrees exactly with a controller stepped with dt = ticks since the last step.
+    let real = fly_with_drops(&arrivals, |ticks| ticks as f32 * DT_S);
+    assert_eq!(real.len(), 8);
+    for (k, (fw, reference)) in real.iter().enumerate() {
+        assert_eq!(fw, reference, "step {k}");
+    }
+    // ...and not with one stepped with the fixed period (the old behaviour): the test bites.
+    let fixed = fly_with_drops(&arrivals, |_| DT_S);
+    let (fw, fixed_ref) = fixed.last().unwrap();
+    let diff = fw
+        .iter()
+        .zip(fixed_ref)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    assert!(diff > 1e-6, "estimates differ by only {diff}");
+    // Without drops the two agree: dt is the period.
+    let all: Vec<Option<Input>> = (0..12).map(|k| Some(off_input(k))).collect();
+    for (fw, reference) in fly_with_drops(&all, |_| DT_S) {
+        assert_eq!(fw, reference);
+    }
+}
+
+#[test]
+fn dt_is_one_period_after_a_watchdog_trip_and_capped() {
+    use crate::control_loop::{dt_for, DT_S};
+    assert_eq!(dt_for(None), DT_S);
+    assert_eq!(dt_for(Some(0)), DT_S);
+    assert_eq!(dt_for(Some(1)), DT_S);
+    assert_eq!(dt_for(Some(3)), 3.0 * DT_S);
+    assert_eq!(dt_for(Some(u32::MAX)), WATCHDOG_TICKS as f32 * DT_S);
+    assert!(dt_for(Some(u32::MAX)) <= 0.1);
+
+    // Through a trip: the first state after it integrates one period, not the whole gap.
+    let mut arrivals: Vec<Option<Input>> = vec![Some(off_input(0)), Some(off_input(1))];
+    arrivals.extend((0..WATCHDOG_TICKS + 5).map(|_| None));
+    arrivals.push(Some(off_input(2)));
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let mut last = None;
+    for arrival in &arrivals {
+        if let Some(input) = arrival {
+            l.on_input(*input);
+            let r = reference.step(
+                &State::from(&input.state),
+                &Setpoint::from(&input.setpoint),
+                DT_S,
+            );
+            last = Some(r.a);
+        }
+        let outcome = l.tick(&mut m, &mut NoCost);
+        if let (Some(_), TickOutcome::Stepped(t)) = (arrival, outcome) {
+            let a = last.unwrap();
+            assert!(t.a.iter().zip(a.iter()).all(|(x, y)| x == y));
+        }
+    }
+    assert_eq!(l.report().watchdog_trips, 1);
 }
