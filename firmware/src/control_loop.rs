@@ -3,7 +3,8 @@
 //!
 //! A tick steps the controller only when a fresh input arrived since the previous tick (a state
 //! is never used twice, so the adaptation law integrates each measurement once), with dt the
-//! time since the state it last used ([`dt_for`]: two periods after one dropped frame). Without
+//! time since the state it last used ([`dt_for`]: two periods after one dropped frame, by the
+//! sender's sequence numbers bounded by the firmware's ticks). Without
 //! fresh input the motors hold their last command until the watchdog runs out: no valid state
 //! for [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate
 //! is kept).
@@ -65,15 +66,19 @@ pub fn load_model(blob: &[u8], slot: &'static mut LearnedModel) -> Result<Model,
     hamflight::blob::decode_into(blob, &mut slot.weights).map(|()| Model::default())
 }
 
-/// The controller's dt (s) for a step `ticks_since_used` ticks after the last state it used: the
-/// real time between the two states, so that the adaptation law integrates over the time that
-/// passed when frames were dropped or late. One period for the first state and the first after
-/// a watchdog trip (the motors were off, nothing to integrate over); capped at the watchdog
-/// timeout, which is below the core's 0.1 s limit on dt.
-pub fn dt_for(ticks_since_used: Option<u32>) -> f32 {
-    // Constant bounds (1 <= WATCHDOG_TICKS, checked below): clamp's bound check folds away.
-    let ticks = ticks_since_used.unwrap_or(1).clamp(1, WATCHDOG_TICKS);
-    ticks as f32 * DT_S
+/// The controller's dt (s) for a step on a state `seq_gap` sender periods after the state it
+/// last used, and `ticks_since_used` of the firmware's own ticks later: the time that passed
+/// between the two states, as the smaller of the two clocks says. The sender's count
+/// ([`Input::seq`], one per control period) sees states lost on the link and stays exact when the
+/// firmware waits on a lock-step host (the PIL test); the firmware's ticks bound a sender that
+/// skips numbers. One period for the first state, the first after a watchdog trip, and a repeated
+/// or restarted sequence (gap 0, or beyond the watchdog timeout).
+pub fn dt_for(ticks_since_used: Option<u32>, seq_gap: u32) -> f32 {
+    let periods = match ticks_since_used {
+        Some(ticks) if (1..=WATCHDOG_TICKS).contains(&seq_gap) => seq_gap.min(ticks).max(1),
+        _ => 1,
+    };
+    periods as f32 * DT_S
 }
 
 // The longest dt (the watchdog timeout) must stay inside the core's (0, 0.1] s.
@@ -167,6 +172,8 @@ pub struct ControlLoop<M> {
     /// Ticks since the controller last used a state (a step without fault), counting the
     /// current one; `None` before the first and after a watchdog trip.
     ticks_since_used: Option<u32>,
+    /// [`Input::seq`] of the state last used.
+    last_used_seq: u32,
     watchdog: Watchdog,
     status: LinkStatus,
     steps: u32,
@@ -188,6 +195,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             controller: model.map(|m| FlightController::new(m, Gains::default())),
             latest: None,
             ticks_since_used: None,
+            last_used_seq: 0,
             watchdog: Watchdog::new(WATCHDOG_TICKS),
             status,
             steps: 0,
@@ -247,7 +255,10 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             return TickOutcome::Idle;
         };
 
-        let dt_s = dt_for(self.ticks_since_used);
+        let dt_s = dt_for(
+            self.ticks_since_used,
+            input.seq.wrapping_sub(self.last_used_seq),
+        );
         let start = cost.now();
         let state = State::from(&input.state);
         let setpoint = Setpoint::from(&input.setpoint);
@@ -261,6 +272,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         if !out.faults.is_fault() {
             // The law and the adaptation integrated this state over `dt_s`.
             self.ticks_since_used = Some(0);
+            self.last_used_seq = input.seq;
         }
         if out.faults.bad_state {
             // Not a valid state: it does not feed the watchdog (the step already gave motors off).
