@@ -115,10 +115,17 @@ fn build_firmware() -> PathBuf {
     let out = cmd
         .output()
         .expect("cannot run cargo to build the firmware");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // rustup adds rust-toolchain.toml's target only when it installs the toolchain.
+    let hint = if stderr.contains("can't find crate for `core`") {
+        "\nthe thumbv7em-none-eabihf target is missing: rustup target add thumbv7em-none-eabihf \
+         (or run firmware/tools/ensure-target.sh)"
+    } else {
+        ""
+    };
     assert!(
         out.status.success(),
-        "firmware build failed (cd firmware && cargo build --release --features qemu --bin qemu):\n{}",
-        String::from_utf8_lossy(&out.stderr)
+        "firmware build failed (cd firmware && cargo build --release --features qemu --bin qemu):\n{stderr}{hint}"
     );
     dir.join("target/thumbv7em-none-eabihf/release/qemu")
 }
