@@ -1,7 +1,8 @@
 //! Puts the right `memory.x` on the linker path and picks the weight blob to embed.
 //!
-//! - Memory: the repository's `memory.x` (Crazyflie: flash from 0x08004000, after the 16 KiB
-//!   bootloader) or, with the `qemu` feature, the same map with flash at 0x08000000.
+//! - Memory, per binary (so that every binary links right whatever the features): `crazyflie`
+//!   gets the repository's `memory.x` (flash from 0x08004000, after the 16 KiB bootloader),
+//!   `qemu` the same map with flash at 0x08000000 (QEMU boots there, no bootloader).
 //! - Weights: `HAMFLIGHT_WEIGHTS` (a path, relative to `firmware/` or absolute) or by default
 //!   `../weights/default.hfw`. If the default file does not exist yet, a checked blob of
 //!   `ModelWeights::default()` is written to OUT_DIR and embedded instead, with a warning, and
@@ -24,18 +25,26 @@ fn main() {
     println!("cargo:rerun-if-changed={}", board_memory.display());
     let memory = fs::read_to_string(&board_memory)
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", board_memory.display()));
-    let memory = if env::var_os("CARGO_FEATURE_QEMU").is_some() {
-        // QEMU loads the ELF at its link address and boots from 0x08000000: no bootloader.
-        memory.replace(
-            "FLASH : ORIGIN = 0x08004000, LENGTH = 1024K - 16K",
-            "FLASH : ORIGIN = 0x08000000, LENGTH = 1024K",
-        )
-    } else {
-        memory
-    };
+    const BOOTLOADER_FLASH: &str = "FLASH : ORIGIN = 0x08004000, LENGTH = 1024K - 16K";
+    assert!(
+        memory.contains(BOOTLOADER_FLASH),
+        "{} no longer has the line `{BOOTLOADER_FLASH}` that the QEMU map replaces",
+        board_memory.display()
+    );
+    // QEMU loads the ELF at its link address and boots from 0x08000000: no bootloader.
+    let qemu_memory = memory.replace(
+        BOOTLOADER_FLASH,
+        "FLASH : ORIGIN = 0x08000000, LENGTH = 1024K",
+    );
     if target.starts_with("thumb") {
-        fs::write(out.join("memory.x"), memory).expect("write memory.x to OUT_DIR");
-        println!("cargo:rustc-link-search={}", out.display());
+        // cortex-m-rt's link.x INCLUDEs memory.x from the linker's search path: one directory
+        // per binary.
+        for (bin, map) in [("crazyflie", &memory), ("qemu", &qemu_memory)] {
+            let dir = out.join(format!("memory-{bin}"));
+            fs::create_dir_all(&dir).expect("create a memory.x directory in OUT_DIR");
+            fs::write(dir.join("memory.x"), map).expect("write memory.x to OUT_DIR");
+            println!("cargo:rustc-link-arg-bin={bin}=-L{}", dir.display());
+        }
     }
 
     // Weight blob.

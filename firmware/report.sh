@@ -5,10 +5,13 @@
 #   FEATURES=loop-1khz firmware/report.sh
 #
 # Needs qemu-system-arm and either arm-none-eabi-size (binutils-arm-none-eabi) or llvm-size
-# (rustup component llvm-tools). Budgets (DESIGN.md): step <= 20,000 instructions (~150 us at
+# (rustup component llvm-tools); adds the thumbv7em-none-eabihf target itself when missing.
+# From the repository root: `cargo fw-report` (same arguments and FEATURES). Budgets (DESIGN.md): step <= 20,000 instructions (~150 us at
 # 168 MHz), flash <= 128 KiB with the weights, static RAM <= 32 KiB.
 set -euo pipefail
 cd "$(dirname "$0")"
+# Adds the thumbv7em target if rustup did not (toolchain installed before rust-toolchain.toml).
+tools/ensure-target.sh
 
 extra="${FEATURES:-}"
 feat_board="${extra}"
@@ -59,5 +62,5 @@ BEGIN {
   printf "| flash (Crazyflie build, incl. %s-byte weight blob) | %d bytes (%.1f KiB) | <= 128 KiB |\n", blob, flash, flash/1024
   printf "| static RAM (.data + .bss + .uninit) | %d bytes (%.1f KiB) | <= 32 KiB |\n", sram, sram/1024
   printf "| peak stack, running (control loop + interrupts) | %d bytes | |\n", peak
-  printf "| peak stack, boot (blob decode) | %d bytes (of %d free) | |\n", boot, ssize
+  printf "| peak stack, boot (blob check, in-place decode) | %d bytes (of %d free) | |\n", boot, ssize
 }'

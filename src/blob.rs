@@ -11,8 +11,9 @@
 //! | 28 | n | body: [`ModelWeights`] in postcard (every parameter an f32, layer by layer) |
 //! | 28 + n | 4 | CRC-32 (IEEE 802.3) of the body |
 //!
-//! [`decode`] checks each field in that order and returns the first failure as a [`BlobError`];
-//! it never panics and never returns a partly loaded model.
+//! [`decode`] (by value) and [`decode_into`] (in place, for small stacks) check each field in that
+//! order and return the first failure as a [`BlobError`]; they never panic and never leave a
+//! partly loaded model.
 
 use crate::model::ModelWeights;
 
@@ -92,14 +93,32 @@ fn le_u32(b: &[u8]) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(..4)?.try_into().ok()?))
 }
 
-/// Decodes and checks a weight blob.
+/// Decodes and checks a weight blob, returning the weights by value (about 10 KB: on a small
+/// stack use [`decode_into`]).
+///
+/// # Errors
+/// As [`decode_into`].
+pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
+    let mut weights = ModelWeights::ZERO;
+    decode_into(bytes, &mut weights)?;
+    Ok(weights)
+}
+
+/// Decodes and checks a weight blob into `out`, in place: no copy of the weights passes through
+/// the stack, so a firmware can boot on a few hundred bytes of it (decoding into a `static`).
+/// Every check runs before the first parameter is written, so on error `out` is unchanged.
+///
+/// The body is postcard's encoding of [`ModelWeights`], which for these all-f32 tuples is each
+/// parameter as 4 little-endian bytes in [`ModelWeights::params_mut`] order; it is read as such
+/// (`tests/blob.rs` checks that postcard agrees on random and shipped blobs).
 ///
 /// # Errors
 /// The first failed check, in file order: [`BlobError::Truncated`] (shorter than the header),
 /// [`BlobError::BadMagic`], [`BlobError::UnsupportedVersion`], [`BlobError::ShapeMismatch`],
 /// [`BlobError::Truncated`] / [`BlobError::TrailingBytes`] (length disagrees with the header),
-/// [`BlobError::Checksum`], [`BlobError::Malformed`], [`BlobError::NonFinite`].
-pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
+/// [`BlobError::Checksum`], [`BlobError::Malformed`] (the body is not
+/// [`ModelWeights::PARAMS`] f32 values), [`BlobError::NonFinite`].
+pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError> {
     let prefix = expected_prefix();
     let magic = bytes.get(..4).ok_or(BlobError::Truncated)?;
     if magic != MAGIC {
@@ -140,15 +159,17 @@ pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
     if crc32(body) != stored_crc {
         return Err(BlobError::Checksum);
     }
-    let (weights, rest) =
-        postcard::take_from_bytes::<ModelWeights>(body).map_err(|_| BlobError::Malformed)?;
-    if !rest.is_empty() {
+    let (params, rest) = body.as_chunks::<4>();
+    if params.len() != ModelWeights::PARAMS || !rest.is_empty() {
         return Err(BlobError::Malformed);
     }
-    if !weights.is_finite() {
+    if !params.iter().all(|b| f32::from_le_bytes(*b).is_finite()) {
         return Err(BlobError::NonFinite);
     }
-    Ok(weights)
+    for (slot, b) in out.params_mut().zip(params) {
+        *slot = f32::from_le_bytes(*b);
+    }
+    Ok(())
 }
 
 /// Encodes weights as a blob (host side).

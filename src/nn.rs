@@ -115,6 +115,12 @@ impl<const I: usize, const O: usize> Dense<I, O> {
         self.bias.iter().all(|v| v.is_finite())
             && self.weight.iter().flatten().all(|v| v.is_finite())
     }
+
+    /// Every parameter in serialization order: the weights row by row (`weight[o][i]`), then
+    /// the biases.
+    pub fn params_mut(&mut self) -> impl Iterator<Item = &mut f32> {
+        self.weight.iter_mut().flatten().chain(self.bias.iter_mut())
+    }
 }
 
 #[inline]
@@ -205,6 +211,14 @@ impl<const I: usize, const H: usize, const O: usize> Mlp<I, H, O> {
     /// True if every parameter is finite.
     pub fn is_finite(&self) -> bool {
         self.l0.is_finite() && self.l1.is_finite() && self.l2.is_finite()
+    }
+
+    /// Every parameter in serialization order: layer by layer, each as [`Dense::params_mut`].
+    pub fn params_mut(&mut self) -> impl Iterator<Item = &mut f32> {
+        self.l0
+            .params_mut()
+            .chain(self.l1.params_mut())
+            .chain(self.l2.params_mut())
     }
 }
 

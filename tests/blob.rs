@@ -9,7 +9,7 @@
 mod common;
 
 use common::SplitMix64;
-use hamflight::blob::{decode, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC};
+use hamflight::blob::{decode, decode_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC};
 use hamflight::model::{GainNet, InertiaNet, ModelWeights};
 use hamflight::nn::{Dense, Mlp};
 use proptest::prelude::*;
@@ -319,6 +319,229 @@ fn every_error_has_display_text() {
     unique.sort();
     unique.dedup();
     assert_eq!(unique.len(), texts.len(), "each variant has its own text");
+}
+
+/// The documented checks, written again from the layout table (not from the codec): the
+/// oracle of the randomized tests below. Returns the parameters on success.
+fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
+    if b.len() < 4 {
+        return Err(BlobError::Truncated);
+    }
+    if b[..4] != *b"HMFW" {
+        return Err(BlobError::BadMagic);
+    }
+    if b.len() < 6 {
+        return Err(BlobError::Truncated);
+    }
+    let version = u16::from_le_bytes([b[4], b[5]]);
+    if version != 1 {
+        return Err(BlobError::UnsupportedVersion(version));
+    }
+    if b.len() < 24 {
+        return Err(BlobError::Truncated);
+    }
+    let shapes: Vec<u8> = ModelWeights::DIMS
+        .iter()
+        .flatten()
+        .flat_map(|d| d.to_le_bytes())
+        .collect();
+    if b[6..24] != shapes[..] {
+        return Err(BlobError::ShapeMismatch);
+    }
+    if b.len() < 28 {
+        return Err(BlobError::Truncated);
+    }
+    let body_len = u32::from_le_bytes([b[24], b[25], b[26], b[27]]) as u64;
+    let total = 28 + body_len + 4;
+    if (b.len() as u64) < total {
+        return Err(BlobError::Truncated);
+    }
+    if (b.len() as u64) > total {
+        return Err(BlobError::TrailingBytes);
+    }
+    let body = &b[28..b.len() - 4];
+    let crc = u32::from_le_bytes([
+        b[b.len() - 4],
+        b[b.len() - 3],
+        b[b.len() - 2],
+        b[b.len() - 1],
+    ]);
+    if crc32_reference(body) != crc {
+        return Err(BlobError::Checksum);
+    }
+    let n = params(&ModelWeights::default()).len();
+    if body.len() != 4 * n {
+        return Err(BlobError::Malformed);
+    }
+    let values: Vec<f32> = body
+        .chunks(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(BlobError::NonFinite);
+    }
+    Ok(values)
+}
+
+/// One random edit of a blob: flip, set, insert, delete, truncate, duplicate a range, or splice
+/// in a header field's worth of random bytes. Some edits are fixed up afterwards (length and
+/// CRC recomputed), so that the deeper checks are reached too.
+fn mutate(rng: &mut SplitMix64, blob: &mut Vec<u8>) {
+    let len = blob.len().max(1);
+    let pos = (rng.next_u64() as usize) % len;
+    let byte = rng.next_u64() as u8;
+    match rng.next_u64() % 8 {
+        0 => {
+            if let Some(b) = blob.get_mut(pos) {
+                *b ^= 1 << (byte % 8);
+            }
+        }
+        1 => {
+            if let Some(b) = blob.get_mut(pos) {
+                *b = byte;
+            }
+        }
+        2 => blob.insert(pos.min(blob.len()), byte),
+        3 => {
+            if pos < blob.len() {
+                blob.remove(pos);
+            }
+        }
+        4 => blob.truncate(pos),
+        5 => {
+            let end = (pos + 1 + (rng.next_u64() as usize) % 16).min(blob.len());
+            let chunk = blob.get(pos..end).map(<[u8]>::to_vec).unwrap_or_default();
+            let at = (rng.next_u64() as usize) % (blob.len() + 1);
+            blob.splice(at..at, chunk);
+        }
+        6 => {
+            // A body edit behind a consistent length and CRC: reaches Malformed / NonFinite.
+            if blob.len() >= HEADER_LEN + CRC_LEN {
+                let mut body = blob[HEADER_LEN..blob.len() - CRC_LEN].to_vec();
+                let k = 4 * ((rng.next_u64() as usize) % (body.len() / 4).max(1));
+                match byte % 4 {
+                    0 => body.truncate((rng.next_u64() as usize) % (body.len() + 1)),
+                    1 => body.push(byte),
+                    2 => {
+                        // Another finite value: still a valid blob.
+                        let v = (rng.next_u64() as u32 as f32).to_le_bytes();
+                        for (d, s) in body.iter_mut().skip(k).zip(v) {
+                            *d = s;
+                        }
+                    }
+                    _ => {
+                        // A NaN or infinity (exponent all ones) at a random parameter.
+                        if let Some(b) = body.get_mut(k + 3) {
+                            *b |= 0x7F;
+                        }
+                        if let Some(b) = body.get_mut(k + 2) {
+                            *b |= 0x80;
+                        }
+                    }
+                }
+                let mut fixed = blob[..24].to_vec();
+                fixed.extend_from_slice(&(body.len() as u32).to_le_bytes());
+                fixed.extend_from_slice(&body);
+                fixed.extend_from_slice(&crc32_reference(&body).to_le_bytes());
+                *blob = fixed;
+            }
+        }
+        _ => {
+            // Random bytes over a header field (version, shapes or length).
+            let at = 4 + (rng.next_u64() as usize) % 24;
+            for k in at..(at + 1 + (byte % 4) as usize).min(blob.len()) {
+                blob[k] = rng.next_u64() as u8;
+            }
+        }
+    }
+}
+
+/// The stable-toolchain counterpart of `fuzz/fuzz_targets/blob.rs`, run by the README's test
+/// command: 20,000 seeded mutants of valid blobs (1–6 edits each) and 5,000 random byte
+/// strings. Neither decoder panics, both give the oracle's result (the same error, or the same
+/// parameters bit for bit), and `decode_into` leaves its output untouched on error.
+#[test]
+fn randomized_mutants_get_the_documented_result() {
+    let mut rng = SplitMix64(0x5EED_B10B);
+    let valid = encode_reference(&random_weights(23));
+    let sentinel = random_weights(29);
+    let mut seen = std::collections::BTreeMap::<String, u32>::new();
+    for case in 0..25_000u32 {
+        let bytes = if case < 20_000 {
+            let mut b = valid.clone();
+            for _ in 0..=(rng.next_u64() % 6) {
+                mutate(&mut rng, &mut b);
+            }
+            b
+        } else {
+            let n = (rng.next_u64() % 96) as usize;
+            let mut b: Vec<u8> = (0..n).map(|_| rng.next_u64() as u8).collect();
+            if rng.next_u64().is_multiple_of(2) && b.len() >= 4 {
+                b[..4].copy_from_slice(b"HMFW");
+            }
+            b
+        };
+        let want = decode_reference(&bytes);
+        let mut out = sentinel;
+        let got = decode_into(&bytes, &mut out);
+        match &want {
+            Ok(values) => {
+                assert_eq!(got, Ok(()), "case {case}");
+                let bits: Vec<u32> = params(&out).iter().map(|v| v.to_bits()).collect();
+                let want_bits: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(bits, want_bits, "case {case}");
+            }
+            Err(e) => {
+                assert_eq!(got, Err(*e), "case {case}: {} bytes", bytes.len());
+                assert_bitwise_eq(&out, &sentinel);
+            }
+        }
+        assert_eq!(
+            decode(&bytes).map(|w| params(&w).iter().map(|v| v.to_bits()).collect::<Vec<_>>()),
+            want.map(|v| v.iter().map(|x| x.to_bits()).collect()),
+            "case {case}"
+        );
+        let key = match got {
+            Ok(()) => "ok".to_string(),
+            Err(e) => format!("{e:?}").split('(').next().unwrap_or("").to_string(),
+        };
+        *seen.entry(key).or_default() += 1;
+    }
+    // Every outcome was reached, so the mutants exercise every check.
+    for key in [
+        "ok",
+        "Truncated",
+        "BadMagic",
+        "UnsupportedVersion",
+        "ShapeMismatch",
+        "Checksum",
+        "TrailingBytes",
+        "Malformed",
+        "NonFinite",
+    ] {
+        assert!(
+            seen.get(key).copied().unwrap_or(0) > 0,
+            "{key} never reached: {seen:?}"
+        );
+    }
+}
+
+/// `decode_into` reads the body as postcard does (the documented layout is postcard's encoding
+/// of the networks), on random weights and on the shipped blob.
+#[test]
+fn decode_into_agrees_with_postcard() {
+    let shipped = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/weights/default.hfw"));
+    let mut blobs: Vec<Vec<u8>> = (0..8)
+        .map(|s| encode_reference(&random_weights(s)))
+        .collect();
+    blobs.extend(shipped.ok());
+    for blob in &blobs {
+        let body = &blob[HEADER_LEN..blob.len() - CRC_LEN];
+        let by_postcard: ModelWeights = postcard::from_bytes(body).expect("postcard body");
+        let mut in_place = ModelWeights::ZERO;
+        decode_into(blob, &mut in_place).expect("valid blob");
+        assert_bitwise_eq(&in_place, &by_postcard);
+    }
 }
 
 proptest! {

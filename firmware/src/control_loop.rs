@@ -2,16 +2,18 @@
 //! [`FlightController::step`] per timer tick, the PWM map, the watchdog and the statistics.
 //!
 //! A tick steps the controller only when a fresh input arrived since the previous tick (a state
-//! is never used twice, so the adaptation law integrates each measurement once). Without fresh
-//! input the motors hold their last command until the watchdog runs out: no valid state for
-//! [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate is
-//! kept).
+//! is never used twice, so the adaptation law integrates each measurement once), with dt the
+//! time since the state it last used ([`dt_for`]: two periods after one dropped frame, by the
+//! sender's sequence numbers bounded by the firmware's ticks). Without
+//! fresh input the motors hold their last command until the watchdog runs out: no valid state
+//! for [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate
+//! is kept).
 
 use crate::link::{Input, LinkStatus, ModelKind, Report, Telemetry};
 use crate::motor::{rpm_to_pwm, Motors};
 use embedded_hal::pwm::SetDutyCycle;
 use hamflight::blob::BlobError;
-use hamflight::model::HamiltonianModel;
+use hamflight::model::{HamiltonianModel, LearnedModel};
 use hamflight::{FlightController, Gains, Setpoint, State};
 
 /// Control-loop rate (Hz): 500, or 1000 with the `loop-1khz` feature.
@@ -20,16 +22,17 @@ pub const LOOP_HZ: u32 = if cfg!(feature = "loop-1khz") {
 } else {
     500
 };
-/// The controller's time step (s).
+/// One control period (s): the controller's dt when consecutive ticks each bring a fresh state.
 pub const DT_S: f32 = 1.0 / LOOP_HZ as f32;
 /// Motors off when no valid state arrived for this long (ms).
 pub const WATCHDOG_MS: u32 = 50;
 /// [`WATCHDOG_MS`] in control ticks (rounded up).
 pub const WATCHDOG_TICKS: u32 = (WATCHDOG_MS * LOOP_HZ).div_ceil(1000);
 
-/// The model the firmware flies: the learned model of the embedded blob.
+/// The model the firmware flies: the learned model of the embedded blob, decoded in place into
+/// a `static` (see [`load_model`]) and borrowed, so that its 10 KiB never pass through the stack.
 #[cfg(not(hamflight_untrained))]
-pub type Model = hamflight::model::LearnedModel;
+pub type Model = &'static LearnedModel;
 /// The model the firmware flies: built without trained weights (`build.rs` found no
 /// `weights/default.hfw`), the nominal model; the embedded placeholder blob is still checked.
 #[cfg(hamflight_untrained)]
@@ -42,23 +45,44 @@ pub const MODEL_KIND: ModelKind = if cfg!(hamflight_untrained) {
     ModelKind::Learned
 };
 
-/// Decodes and checks the weight blob and builds the model.
+/// Decodes and checks the weight blob into `slot` ([`hamflight::blob::decode_into`]: in place,
+/// no copy of the weights on the stack) and builds the model on it.
 ///
 /// # Errors
-/// The blob's first failed check ([`BlobError`]).
+/// The blob's first failed check ([`BlobError`]); `slot` is then unchanged.
 #[cfg(not(hamflight_untrained))]
-pub fn load_model(blob: &[u8]) -> Result<Model, BlobError> {
-    Model::from_blob(blob)
+pub fn load_model(blob: &[u8], slot: &'static mut LearnedModel) -> Result<Model, BlobError> {
+    hamflight::blob::decode_into(blob, &mut slot.weights)?;
+    Ok(slot)
 }
 
-/// Decodes and checks the weight blob and builds the model.
+/// Decodes and checks the weight blob into `slot` (in place, as the trained build does) and
+/// builds the nominal model.
 ///
 /// # Errors
 /// The blob's first failed check ([`BlobError`]).
 #[cfg(hamflight_untrained)]
-pub fn load_model(blob: &[u8]) -> Result<Model, BlobError> {
-    hamflight::blob::decode(blob).map(|_| Model::default())
+pub fn load_model(blob: &[u8], slot: &'static mut LearnedModel) -> Result<Model, BlobError> {
+    hamflight::blob::decode_into(blob, &mut slot.weights).map(|()| Model::default())
 }
+
+/// The controller's dt (s) for a step on a state `seq_gap` sender periods after the state it
+/// last used, and `ticks_since_used` of the firmware's own ticks later: the time that passed
+/// between the two states, as the smaller of the two clocks says. The sender's count
+/// ([`Input::seq`], one per control period) sees states lost on the link and stays exact when the
+/// firmware waits on a lock-step host (the PIL test); the firmware's ticks bound a sender that
+/// skips numbers. One period for the first state, the first after a watchdog trip, and a repeated
+/// or restarted sequence (gap 0, or beyond the watchdog timeout).
+pub fn dt_for(ticks_since_used: Option<u32>, seq_gap: u32) -> f32 {
+    let periods = match ticks_since_used {
+        Some(ticks) if (1..=WATCHDOG_TICKS).contains(&seq_gap) => seq_gap.min(ticks).max(1),
+        _ => 1,
+    };
+    periods as f32 * DT_S
+}
+
+// The longest dt (the watchdog timeout) must stay inside the core's (0, 0.1] s.
+const _: () = assert!(WATCHDOG_TICKS >= 1 && WATCHDOG_MS <= 100);
 
 /// Counts ticks without a valid state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -145,6 +169,11 @@ pub enum TickOutcome {
 pub struct ControlLoop<M> {
     controller: Result<FlightController<M>, BlobError>,
     latest: Option<Input>,
+    /// Ticks since the controller last used a state (a step without fault), counting the
+    /// current one; `None` before the first and after a watchdog trip.
+    ticks_since_used: Option<u32>,
+    /// [`Input::seq`] of the state last used.
+    last_used_seq: u32,
     watchdog: Watchdog,
     status: LinkStatus,
     steps: u32,
@@ -165,6 +194,8 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         Self {
             controller: model.map(|m| FlightController::new(m, Gains::default())),
             latest: None,
+            ticks_since_used: None,
+            last_used_seq: 0,
             watchdog: Watchdog::new(WATCHDOG_TICKS),
             status,
             steps: 0,
@@ -210,10 +241,12 @@ impl<M: HamiltonianModel> ControlLoop<M> {
                 return TickOutcome::Idle;
             }
         };
+        self.ticks_since_used = self.ticks_since_used.map(|n| n.saturating_add(1));
         let Some(input) = self.latest.take() else {
             if self.watchdog.starve() {
                 motors.off();
                 self.status = LinkStatus::WatchdogTripped;
+                self.ticks_since_used = None;
                 return TickOutcome::Stopped(self.status);
             }
             if self.watchdog.tripped() || self.status == LinkStatus::WaitingForState {
@@ -222,20 +255,30 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             return TickOutcome::Idle;
         };
 
+        let dt_s = dt_for(
+            self.ticks_since_used,
+            input.seq.wrapping_sub(self.last_used_seq),
+        );
         let start = cost.now();
         let state = State::from(&input.state);
         let setpoint = Setpoint::from(&input.setpoint);
-        let out = controller.step(&state, &setpoint, DT_S);
+        let out = controller.step(&state, &setpoint, dt_s);
         let mut pwm = out.rotors.rpm.map(rpm_to_pwm);
         if motors.set(pwm).is_err() {
             pwm = [0; 4];
         }
         let spent = cost.since(start);
 
+        if !out.faults.is_fault() {
+            // The law and the adaptation integrated this state over `dt_s`.
+            self.ticks_since_used = Some(0);
+            self.last_used_seq = input.seq;
+        }
         if out.faults.bad_state {
             // Not a valid state: it does not feed the watchdog (the step already gave motors off).
             if self.watchdog.starve() {
                 self.status = LinkStatus::WatchdogTripped;
+                self.ticks_since_used = None;
             }
         } else {
             self.watchdog.feed();

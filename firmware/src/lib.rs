@@ -1,8 +1,8 @@
 //! # hamflight-firmware
 //!
-//! The hamflight core on the Crazyflie 2.1 (STM32F405RG, 168 MHz) and, with the `qemu` feature,
-//! on QEMU's `netduinoplus2` (the same chip without a bootloader), for processor-in-the-loop
-//! tests.
+//! The hamflight core on the Crazyflie 2.1 (STM32F405RG, 168 MHz) and, in the `qemu` binary
+//! (feature `qemu`), on QEMU's `netduinoplus2` (the same chip without a bootloader), for
+//! processor-in-the-loop tests.
 //!
 //! Everything that does not touch the chip lives here and is unit-tested on the host
 //! (`cargo test --lib --target x86_64-unknown-linux-gnu`):

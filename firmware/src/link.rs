@@ -13,8 +13,8 @@
 //!
 //! This file is also compiled into the host's processor-in-the-loop test
 //! (`host-train/tests/pil_qemu.rs` includes it with `#[path]`), so both ends encode and decode
-//! exactly the same bytes. It therefore depends only on `core`, `serde`, `postcard`,
-//! `nalgebra` and `hamflight`.
+//! exactly the same bytes. It therefore depends only on `core`, `serde`, `postcard`, `cobs`
+//! (postcard's own COBS crate), `nalgebra` and `hamflight`.
 
 use hamflight::{Faults, Output, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
@@ -58,7 +58,10 @@ pub struct WireSetpoint {
 /// One control input: the latest state estimate and the setpoint to track.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Input {
-    /// Sequence number, echoed in the telemetry of the step that used this input.
+    /// Sequence number, echoed in the telemetry of the step that used this input. It counts
+    /// control periods (1 / [`Hello::loop_hz`]): +1 per period, so a gap of k says k − 1
+    /// states were lost, and the controller integrates over k periods (at most as many as the
+    /// firmware's own ticks since its last step; see `control_loop::dt_for`).
     pub seq: u32,
     /// State estimate.
     pub state: WireState,
@@ -196,7 +199,8 @@ pub enum ModelKind {
 /// Sent at boot and on [`Uplink::Hello`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hello {
-    /// Control-loop rate (Hz); the controller's dt is 1 / `loop_hz`.
+    /// Control-loop rate (Hz); one control period, the controller's dt while no state is lost,
+    /// is 1 / `loop_hz`.
     pub loop_hz: u32,
     /// True if the weight blob passed every check at boot.
     pub blob_ok: bool,
@@ -313,6 +317,7 @@ pub enum FrameError {
 }
 
 /// Encodes `msg` as one complete frame (delimiter included) into `out`; returns its length.
+/// The COBS step is the `cobs` crate's (the one postcard uses).
 ///
 /// # Errors
 /// [`FrameError::Overflow`] if the message does not fit `out` (or [`MAX_PAYLOAD`]).
@@ -325,64 +330,10 @@ pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, FrameError
     raw.get_mut(n..n + 4)
         .ok_or(FrameError::Overflow)?
         .copy_from_slice(&crc.to_le_bytes());
-    let len = cobs_encode(raw.get(..n + 4).ok_or(FrameError::Overflow)?, out)
-        .ok_or(FrameError::Overflow)?;
+    let body = raw.get(..n + 4).ok_or(FrameError::Overflow)?;
+    let len = cobs::try_encode(body, out).map_err(|_| FrameError::Overflow)?;
     *out.get_mut(len).ok_or(FrameError::Overflow)? = 0;
     Ok(len + 1)
-}
-
-/// COBS-encodes `src` into `dst` (no delimiter); `None` if `dst` is too small.
-pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
-    let mut code_at = 0usize;
-    let mut out = 1usize;
-    let mut code = 1u8;
-    for &b in src {
-        if b == 0 {
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            out += 1;
-            code = 1;
-        } else {
-            *dst.get_mut(out)? = b;
-            out += 1;
-            code += 1;
-            if code == 0xFF {
-                *dst.get_mut(code_at)? = code;
-                code_at = out;
-                out += 1;
-                code = 1;
-            }
-        }
-    }
-    *dst.get_mut(code_at)? = code;
-    Some(out)
-}
-
-/// Decodes COBS in place (no delimiter in `buf`); returns the decoded length.
-pub fn cobs_decode(buf: &mut [u8]) -> Option<usize> {
-    let len = buf.len();
-    let (mut r, mut w) = (0usize, 0usize);
-    while r < len {
-        let code = *buf.get(r)?;
-        if code == 0 {
-            return None;
-        }
-        r += 1;
-        for _ in 1..code {
-            let b = *buf.get(r)?;
-            if b == 0 {
-                return None;
-            }
-            *buf.get_mut(w)? = b;
-            w += 1;
-            r += 1;
-        }
-        if code != 0xFF && r < len {
-            *buf.get_mut(w)? = 0;
-            w += 1;
-        }
-    }
-    Some(w)
 }
 
 /// Accumulates received bytes and yields one message per frame.
@@ -437,7 +388,7 @@ impl FrameDecoder {
 
     fn finish<T: for<'de> Deserialize<'de>>(&mut self, len: usize) -> Result<T, FrameError> {
         let frame = self.buf.get_mut(..len).ok_or(FrameError::Overflow)?;
-        let n = cobs_decode(frame).ok_or(FrameError::Cobs)?;
+        let n = cobs::decode_in_place(frame).map_err(|_| FrameError::Cobs)?;
         let body_len = n.checked_sub(4).ok_or(FrameError::Crc)?;
         let body = frame.get(..body_len).ok_or(FrameError::Crc)?;
         let crc = frame

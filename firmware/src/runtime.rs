@@ -7,8 +7,10 @@
 //!   The step runs outside any critical section, so reception is never blocked by it.
 //! - Thread mode ([`pump`]): writes queued frames to the UART and sleeps.
 //!
-//! The binaries create the peripherals, call [`init`] and bind the interrupts to [`on_rx`] and
-//! [`on_tick`].
+//! Nothing here depends on the board or on a cargo feature: each binary says which USART carries
+//! the link (a [`LinkReceiver`] in its own `static`, [`Board::link_irq`]), at what clock TIM5
+//! counts and which cost counter works ([`Board`]), then calls [`init`] and binds the interrupts
+//! to [`on_rx`] and [`on_tick`]. So every binary builds with every feature set.
 
 use crate::control_loop::{
     load_model, ControlLoop, CostCounter, Model, TickOutcome, LOOP_HZ, WATCHDOG_TICKS,
@@ -22,25 +24,10 @@ use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use critical_section::Mutex;
 use embedded_hal_nb::serial::{Read, Write};
+use hamflight::model::{LearnedModel, ModelWeights};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::serial::RxListen;
 use stm32f4xx_hal::timer::ErasedChannel;
-
-/// The USART of the link: USART1 under QEMU (the first `-serial`), USART3 on the Crazyflie
-/// (deck connector UART1, PC10 TX / PC11 RX; USART6 is the nRF51 syslink).
-#[cfg(feature = "qemu")]
-pub type LinkUsart = pac::USART1;
-/// The USART of the link (see the `qemu` variant).
-#[cfg(not(feature = "qemu"))]
-pub type LinkUsart = pac::USART3;
-/// The link's receive half.
-pub type LinkRx = stm32f4xx_hal::serial::Rx<LinkUsart>;
-/// The link's interrupt.
-#[cfg(feature = "qemu")]
-pub const LINK_IRQ: pac::Interrupt = pac::Interrupt::USART1;
-/// The link's interrupt.
-#[cfg(not(feature = "qemu"))]
-pub const LINK_IRQ: pac::Interrupt = pac::Interrupt::USART3;
 
 /// The Crazyflie 2.1 motor outputs: M1 TIM2_CH2, M2 TIM2_CH4, M3 TIM2_CH1, M4 TIM4_CH4.
 pub type BoardMotors = Motors<
@@ -81,44 +68,72 @@ pub fn board_motors(
     Motors { m1, m2, m3, m4 }
 }
 
-/// The step-cost counter of this build.
-#[cfg(feature = "qemu")]
-pub type Counter = SysTickCounter;
-/// The step-cost counter of this build.
-#[cfg(not(feature = "qemu"))]
-pub type Counter = DwtCounter;
+/// The free-running counter that measures the step cost on a board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Counter {
+    /// DWT cycle counter: CPU cycles (real hardware; reads 0 under QEMU).
+    Dwt,
+    /// SysTick as a free-running 24-bit down-counter on the core clock. Under QEMU with
+    /// `-icount shift=0` it advances 168 ticks per 1000 instructions.
+    SysTick,
+}
 
-/// DWT cycle counter (real hardware; reads 0 under QEMU).
-pub struct DwtCounter;
-
-impl CostCounter for DwtCounter {
-    fn now(&mut self) -> u32 {
-        cortex_m::peripheral::DWT::cycle_count()
-    }
-    fn since(&mut self, start: u32) -> u32 {
-        cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start)
+impl Counter {
+    /// The unit the telemetry reports this counter's ticks in.
+    pub const fn unit(self) -> CostUnit {
+        match self {
+            Self::Dwt => CostUnit::Cycles,
+            Self::SysTick => CostUnit::QemuSysTick168MHz,
+        }
     }
 }
 
-/// SysTick as a free-running 24-bit down-counter on the core clock. Under QEMU with
-/// `-icount shift=0` it advances 168 ticks per 1000 instructions.
-pub struct SysTickCounter;
-
-impl CostCounter for SysTickCounter {
+impl CostCounter for Counter {
     fn now(&mut self) -> u32 {
-        cortex_m::peripheral::SYST::get_current()
+        match self {
+            Self::Dwt => cortex_m::peripheral::DWT::cycle_count(),
+            Self::SysTick => cortex_m::peripheral::SYST::get_current(),
+        }
     }
     fn since(&mut self, start: u32) -> u32 {
-        start.wrapping_sub(cortex_m::peripheral::SYST::get_current()) & 0x00FF_FFFF
+        match self {
+            Self::Dwt => cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start),
+            Self::SysTick => {
+                start.wrapping_sub(cortex_m::peripheral::SYST::get_current()) & 0x00FF_FFFF
+            }
+        }
     }
 }
 
-/// The unit of [`Counter`].
-pub const COST_UNIT: CostUnit = if cfg!(feature = "qemu") {
-    CostUnit::QemuSysTick168MHz
-} else {
-    CostUnit::Cycles
-};
+/// What differs between the boards that [`init`] needs to know.
+#[derive(Clone, Copy, Debug)]
+pub struct Board {
+    /// The interrupt of the link's USART (whose receiver the binary keeps in a
+    /// [`LinkReceiver`] cell and hands to [`on_rx`]).
+    pub link_irq: pac::Interrupt,
+    /// The input clock of TIM5 (Hz).
+    pub timer_clock_hz: u32,
+    /// The step-cost counter that works where this binary runs.
+    pub counter: Counter,
+}
+
+/// The link's receive side: a USART receiver (any [`Read<u8>`]) and the frame decoder. A binary
+/// keeps one in a `static` [`IsrCell`] and calls [`on_rx`] on it from the USART's interrupt.
+pub struct LinkReceiver<R> {
+    rx: R,
+    dec: FrameDecoder,
+}
+
+impl<R: Read<u8> + RxListen> LinkReceiver<R> {
+    /// Enables `rx`'s receive interrupt (the NVIC line stays masked until [`init`]).
+    pub fn new(mut rx: R) -> Self {
+        rx.listen();
+        Self {
+            rx,
+            dec: FrameDecoder::new(),
+        }
+    }
+}
 
 type Frame = heapless::Vec<u8, MAX_FRAME>;
 
@@ -192,7 +207,9 @@ impl<T> Default for IsrCell<T> {
 }
 
 static TICK: IsrCell<Tick> = IsrCell::new();
-static RX: IsrCell<(LinkRx, FrameDecoder)> = IsrCell::new();
+/// The learned model's weights, decoded in place at boot (all zeros until then: `.bss`).
+static MODEL: ModelSlot = ModelSlot::new();
+static SYSTICK_COST: AtomicBool = AtomicBool::new(false);
 static BOOT_STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 static LATEST: Mutex<Cell<Option<Input>>> = Mutex::new(Cell::new(None));
 static TXQ: Mutex<RefCell<heapless::Deque<Frame, 8>>> =
@@ -225,7 +242,11 @@ fn hello() -> Downlink {
         blob_len: crate::WEIGHT_BLOB.len() as u32,
         blob_crc: BLOB_CRC.load(Ordering::Relaxed),
         model: crate::control_loop::MODEL_KIND,
-        cost_unit: COST_UNIT,
+        cost_unit: if SYSTICK_COST.load(Ordering::Relaxed) {
+            Counter::SysTick.unit()
+        } else {
+            Counter::Dwt.unit()
+        },
         watchdog_ticks: WATCHDOG_TICKS,
     })
 }
@@ -236,20 +257,56 @@ pub struct Boot {
     pub blob: Result<(), hamflight::blob::BlobError>,
 }
 
-/// Decodes the blob, builds the loop, starts TIM5 at [`LOOP_HZ`] from a `timer_clock_hz` input
-/// clock, starts the cost counter, enables the interrupts (link RX above the control tick) and
-/// queues the boot [`Hello`]. Never inlined: its large temporaries (the decoded weights) live in
-/// its own frame, gone once it returns; call [`repaint_stack`] then.
+/// A `static` home for the learned model, filled once at boot by decoding the blob in place.
+struct ModelSlot {
+    model: UnsafeCell<LearnedModel>,
+    taken: AtomicBool,
+}
+
+// SAFETY: `take` hands out the only reference, once.
+unsafe impl Sync for ModelSlot {}
+
+impl ModelSlot {
+    const fn new() -> Self {
+        Self {
+            model: UnsafeCell::new(LearnedModel::new(ModelWeights::ZERO)),
+            taken: AtomicBool::new(false),
+        }
+    }
+
+    /// The slot, the first time; `None` after.
+    // A singleton: the flag hands the one `&mut` out once, like `cortex_m::singleton!` (which
+    // would build the 10 KiB value on the stack first).
+    #[allow(clippy::mut_from_ref)]
+    fn take(&'static self) -> Option<&'static mut LearnedModel> {
+        if self.taken.swap(true, Ordering::AcqRel) {
+            return None;
+        }
+        // SAFETY: the flag makes this the one and only reference, for the rest of the program.
+        Some(unsafe { &mut *self.model.get() })
+    }
+}
+
+/// Decodes the blob in place into a `static`, builds the loop, starts TIM5 at [`LOOP_HZ`], starts
+/// the cost counter, enables the interrupts (link RX above the control tick) and queues the boot
+/// [`Hello`]. The binary has put its [`LinkReceiver`] in place before. Nothing large passes
+/// through the stack (the boot peak is reported as `stack_boot_peak_bytes`); call
+/// [`repaint_stack`] afterwards. Never inlined, so that its set-up temporaries do not stay in the
+/// caller's frame, under every interrupt for the rest of the flight.
 #[inline(never)]
 pub fn init(
     mut motors: BoardMotors,
-    mut rx: LinkRx,
     timer: pac::TIM5,
-    timer_clock_hz: u32,
+    board: Board,
     core: &mut cortex_m::Peripherals,
 ) -> Boot {
     motors.off();
-    let model = load_model(crate::WEIGHT_BLOB);
+    SYSTICK_COST.store(board.counter == Counter::SysTick, Ordering::Relaxed);
+    let Some(slot) = MODEL.take() else {
+        // Only a second call gets here; the first one's loop keeps running.
+        return Boot { blob: Ok(()) };
+    };
+    let model = load_model(crate::WEIGHT_BLOB, slot);
     let blob = model.as_ref().map(|_| ()).map_err(|e| *e);
     BLOB_OK.store(blob.is_ok(), Ordering::Relaxed);
     BLOB_CRC.store(
@@ -257,7 +314,7 @@ pub fn init(
         Ordering::Relaxed,
     );
 
-    // Cost counters: both are started; the build reads the one that works where it runs.
+    // Cost counters: both are started; the board says which one works where it runs.
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
     core.SYST
@@ -273,7 +330,7 @@ pub fn init(
             .apb1enr()
             .modify(|_, w| w.tim5en().set_bit())
     };
-    let psc = (timer_clock_hz / 1_000_000).saturating_sub(1);
+    let psc = (board.timer_clock_hz / 1_000_000).saturating_sub(1);
     timer.cr1().write(|w| w.cen().clear_bit());
     timer.psc().write(|w| w.psc().set(psc as u16));
     timer.arr().write(|w| w.arr().set(1_000_000 / LOOP_HZ - 1));
@@ -281,20 +338,18 @@ pub fn init(
     timer.sr().write(|w| w.uif().clear_bit());
     timer.dier().write(|w| w.uie().set_bit());
 
-    rx.listen();
-    RX.init_with(|| (rx, FrameDecoder::new()));
     TICK.init_with(|| Tick {
         control: ControlLoop::new(model),
         motors,
-        counter: Counter {},
+        counter: board.counter,
         timer,
     });
     queue(&hello());
     // SAFETY: the handlers' state is in place; priorities are set before unmasking.
     unsafe {
-        core.NVIC.set_priority(LINK_IRQ, 0x40);
+        core.NVIC.set_priority(board.link_irq, 0x40);
         core.NVIC.set_priority(pac::Interrupt::TIM5, 0x80);
-        cortex_m::peripheral::NVIC::unmask(LINK_IRQ);
+        cortex_m::peripheral::NVIC::unmask(board.link_irq);
         cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM5);
     }
     // Start the loop last.
@@ -302,12 +357,12 @@ pub fn init(
     Boot { blob }
 }
 
-/// Body of the link's RX interrupt.
-pub fn on_rx() {
-    RX.with(|(rx, dec)| rx_drain(rx, dec));
+/// Body of the link's RX interrupt: drains the USART of `link` into its decoder.
+pub fn on_rx<R: Read<u8>>(link: &IsrCell<LinkReceiver<R>>) {
+    link.with(|l| rx_drain(&mut l.rx, &mut l.dec));
 }
 
-fn rx_drain(rx: &mut LinkRx, dec: &mut FrameDecoder) {
+fn rx_drain<R: Read<u8>>(rx: &mut R, dec: &mut FrameDecoder) {
     loop {
         match rx.read() {
             Ok(byte) => match dec.push::<Uplink>(byte) {
@@ -429,7 +484,7 @@ pub fn pump<W: Write<u8>>(tx: &mut W) -> bool {
     false
 }
 
-/// Records the boot-time stack peak (blob decoding moves the networks' weights around) and
+/// Records the boot-time stack peak (clock, pin and loop set-up, blob check) and
 /// paints the stack below the current frame again, so that [`stack_peak`] afterwards measures
 /// the steady state: the control loop, the interrupts and thread mode.
 pub fn repaint_stack() {

@@ -7,7 +7,7 @@ use crate::link::{
 use crate::motor::{pwm_to_rpm, rpm_to_pwm, Motors};
 use core::convert::Infallible;
 use embedded_hal::pwm::{ErrorType, SetDutyCycle};
-use hamflight::model::NominalModel;
+use hamflight::model::{LearnedModel, ModelWeights, NominalModel};
 use hamflight::{Setpoint, State};
 use nalgebra::Vector3;
 
@@ -63,20 +63,323 @@ fn frame_round_trip() {
     assert_eq!(got, vec![Ok(msg)]);
 }
 
+// ---- Reference framing, written from the COBS paper and the frame layout, independent of the
+// `cobs` crate that link.rs uses: the oracle of the tests below. ----
+
+/// COBS (Cheshire & Baker): each group is a code byte (1 + the non-zero bytes that follow, 0xFF
+/// for a full group of 254 without an implied zero) and the bytes.
+fn cobs_encode_reference(src: &[u8]) -> Vec<u8> {
+    let mut out = vec![0u8];
+    let mut code_at = 0;
+    for &b in src {
+        if b == 0 {
+            out[code_at] = (out.len() - code_at) as u8;
+            code_at = out.len();
+            out.push(0);
+        } else {
+            out.push(b);
+            if out.len() - code_at == 0xFF {
+                out[code_at] = 0xFF;
+                code_at = out.len();
+                out.push(0);
+            }
+        }
+    }
+    out[code_at] = (out.len() - code_at) as u8;
+    out
+}
+
+/// The inverse; `None` for a zero byte or a group running past the end.
+fn cobs_decode_reference(enc: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::new();
+    let mut r = 0;
+    while r < enc.len() {
+        let code = enc[r] as usize;
+        if code == 0 || r + code > enc.len() {
+            return None;
+        }
+        let group = &enc[r + 1..r + code];
+        if group.contains(&0) {
+            return None;
+        }
+        out.extend_from_slice(group);
+        r += code;
+        if code != 0xFF && r < enc.len() {
+            out.push(0);
+        }
+    }
+    Some(out)
+}
+
+/// CRC-32/ISO-HDLC bit by bit.
+fn crc32_reference(data: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in data {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+/// What the decoder must make of the bytes between two delimiters.
+fn frame_reference<T: for<'de> serde::Deserialize<'de>>(
+    frame: &[u8],
+) -> Option<Result<T, FrameError>> {
+    if frame.is_empty() {
+        return None;
+    }
+    if frame.len() > link::MAX_FRAME {
+        return Some(Err(FrameError::Overflow));
+    }
+    let Some(raw) = cobs_decode_reference(frame) else {
+        return Some(Err(FrameError::Cobs));
+    };
+    if raw.len() < 4 {
+        return Some(Err(FrameError::Crc));
+    }
+    let (body, crc) = raw.split_at(raw.len() - 4);
+    if crc32_reference(body).to_le_bytes() != crc {
+        return Some(Err(FrameError::Crc));
+    }
+    Some(postcard::from_bytes(body).map_err(|_| FrameError::Decode))
+}
+
+fn postcard_bytes<T: serde::Serialize>(msg: &T) -> Vec<u8> {
+    let mut buf = [0u8; 512];
+    postcard::to_slice(msg, &mut buf).unwrap().to_vec()
+}
+
+/// The frame of `msg` by the reference: COBS(postcard ‖ CRC-32 LE) ‖ 0.
+fn frame_by_reference<T: serde::Serialize>(msg: &T) -> Vec<u8> {
+    let mut raw = postcard_bytes(msg);
+    let crc = crc32_reference(&raw);
+    raw.extend_from_slice(&crc.to_le_bytes());
+    let mut f = cobs_encode_reference(&raw);
+    f.push(0);
+    f
+}
+
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+    /// A finite f32 of any bit pattern (±0, subnormal, huge), often with zero bytes in it.
+    fn f32(&mut self) -> f32 {
+        loop {
+            let bits = match self.below(4) {
+                0 => 0,
+                1 => (self.next_u64() as u32) & 0xFF00_FF00,
+                _ => self.next_u64() as u32,
+            };
+            let x = f32::from_bits(bits);
+            if x.is_finite() {
+                return x;
+            }
+        }
+    }
+    fn f32s<const N: usize>(&mut self) -> [f32; N] {
+        core::array::from_fn(|_| self.f32())
+    }
+}
+
+fn random_uplink(rng: &mut SplitMix64) -> Uplink {
+    match rng.below(6) {
+        0 => Uplink::Hello,
+        1 => Uplink::Finish,
+        _ => Uplink::Input(Input {
+            seq: rng.next_u64() as u32,
+            state: WireState {
+                p: rng.f32s(),
+                rot: rng.f32s(),
+                v: rng.f32s(),
+                w: rng.f32s(),
+            },
+            setpoint: WireSetpoint {
+                p: rng.f32s(),
+                v: rng.f32s(),
+                a: rng.f32s(),
+                j: rng.f32s(),
+                yaw: rng.f32(),
+                yaw_rate: rng.f32(),
+            },
+        }),
+    }
+}
+
+fn random_downlink(rng: &mut SplitMix64) -> Downlink {
+    let word = |rng: &mut SplitMix64| rng.next_u64() as u32 >> rng.below(32);
+    match rng.below(4) {
+        0 => Downlink::Status(link::LinkStatus::WatchdogTripped),
+        1 => Downlink::Report(link::Report {
+            steps: word(rng),
+            total_step_cost: rng.next_u64() >> rng.below(64),
+            stack_peak_bytes: word(rng),
+            ..link::Report::default()
+        }),
+        _ => Downlink::Telemetry(Telemetry {
+            seq: word(rng),
+            rpm: rng.f32s(),
+            thrust_n: rng.f32s(),
+            duty: [rng.next_u64() as u16; 4],
+            a: rng.f32s(),
+            faults: rng.next_u64() as u16,
+            step_cost: word(rng),
+            bad_frames: word(rng),
+            watchdog_trips: word(rng),
+        }),
+    }
+}
+
+/// Bit-exact comparison of decoded messages (postcard re-encoding: f32 -0.0 vs 0.0 differ).
+fn same<T: serde::Serialize>(a: &Result<T, FrameError>, b: &Result<T, FrameError>) -> bool {
+    match (a, b) {
+        (Ok(x), Ok(y)) => postcard_bytes(x) == postcard_bytes(y),
+        (Err(x), Err(y)) => x == y,
+        _ => false,
+    }
+}
+
 #[test]
-fn cobs_round_trips_long_and_zero_runs() {
+fn frames_are_byte_identical_to_the_reference_framing() {
+    let mut rng = SplitMix64(1);
+    let mut buf = [0u8; link::MAX_FRAME];
+    for _ in 0..2000 {
+        let up = random_uplink(&mut rng);
+        let n = link::encode(&up, &mut buf).unwrap();
+        assert_eq!(&buf[..n], &frame_by_reference(&up)[..], "{up:?}");
+        let down = random_downlink(&mut rng);
+        let n = link::encode(&down, &mut buf).unwrap();
+        assert_eq!(&buf[..n], &frame_by_reference(&down)[..], "{down:?}");
+    }
+    // COBS edge cases: long runs without zeros (a full 254-byte group) and all zeros.
     for len in [0usize, 1, 253, 254, 255, 300] {
         for fill in [0u8, 1, 0xFF] {
             let src: Vec<u8> = (0..len)
                 .map(|i| if i % 7 == 3 { 0 } else { fill })
                 .collect();
             let mut enc = vec![0u8; len + len / 254 + 2];
-            let n = link::cobs_encode(&src, &mut enc).unwrap();
-            assert!(enc[..n].iter().all(|&b| b != 0));
-            let m = link::cobs_decode(&mut enc[..n]).unwrap();
-            assert_eq!(&enc[..m], &src[..], "len {len} fill {fill}");
+            let n = cobs::try_encode(&src, &mut enc).unwrap();
+            if len > 0 {
+                assert_eq!(
+                    &enc[..n],
+                    &cobs_encode_reference(&src)[..],
+                    "len {len} fill {fill}"
+                );
+            }
+            assert_eq!(
+                cobs_decode_reference(&cobs_encode_reference(&src)),
+                Some(src)
+            );
         }
     }
+}
+
+/// Feeds `stream` to a fresh decoder and to the reference; both must yield the same results in
+/// the same order.
+fn check_stream<T>(stream: &[u8]) -> usize
+where
+    T: for<'de> serde::Deserialize<'de> + serde::Serialize + core::fmt::Debug,
+{
+    let got = decode_all::<T>(stream);
+    let want: Vec<Result<T, FrameError>> = stream
+        .split(|&b| b == 0)
+        .take(stream.split(|&b| b == 0).count() - 1) // bytes after the last delimiter wait
+        .filter_map(frame_reference::<T>)
+        .collect();
+    assert_eq!(got.len(), want.len(), "{got:?}\n{want:?}");
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(same(g, w), "result {k}: {g:?} vs {w:?}");
+    }
+    got.len()
+}
+
+/// The stable-toolchain counterpart of `fuzz/fuzz_targets/link_frame.rs`, run by the README's
+/// test command: 3,000 seeded streams of valid, corrupted, truncated, spliced and overlong
+/// frames and random bytes, for both directions. The decoder never panics, yields exactly what
+/// the reference framing says (message, or which error) in order, and resynchronises at every
+/// delimiter.
+#[test]
+fn randomized_streams_decode_as_the_reference_says() {
+    let mut rng = SplitMix64(0x11AC);
+    let mut outcomes = [0usize; 5]; // ok, Overflow, Cobs, Crc, Decode
+    for case in 0..3000 {
+        let mut stream = Vec::new();
+        for _ in 0..1 + rng.below(8) {
+            let mut frame = if case % 2 == 0 {
+                frame_by_reference(&random_uplink(&mut rng))
+            } else {
+                frame_by_reference(&random_downlink(&mut rng))
+            };
+            match rng.below(8) {
+                0 | 1 => {} // intact
+                2 => {
+                    let k = rng.below(frame.len() - 1);
+                    frame[k] ^= 1 << rng.below(8); // may create a zero: a split frame
+                }
+                3 => {
+                    let k = rng.below(frame.len() - 1);
+                    frame[k] = rng.next_u64() as u8;
+                }
+                4 => {
+                    let keep = rng.below(frame.len());
+                    frame.drain(keep..frame.len() - 1); // truncated, still delimited
+                }
+                5 => {
+                    // Overlong: random non-zero bytes past MAX_FRAME.
+                    frame = (0..link::MAX_FRAME + 1 + rng.below(300))
+                        .map(|_| 1 + rng.below(255) as u8)
+                        .collect();
+                    frame.push(0);
+                }
+                6 => {
+                    // Random bytes, zeros included.
+                    frame = (0..rng.below(80)).map(|_| rng.next_u64() as u8).collect();
+                }
+                _ => {
+                    let k = rng.below(frame.len());
+                    frame.insert(k, rng.next_u64() as u8);
+                }
+            }
+            stream.extend_from_slice(&frame);
+        }
+        stream.push(0);
+        let n = if case % 2 == 0 {
+            check_stream::<Uplink>(&stream)
+        } else {
+            check_stream::<Downlink>(&stream)
+        };
+        assert!(n > 0 || stream.iter().all(|&b| b == 0));
+        // Tally what the decoder saw, to show that every path is reached.
+        for r in decode_all::<Uplink>(&stream) {
+            let k = match r {
+                Ok(_) => 0,
+                Err(FrameError::Overflow) => 1,
+                Err(FrameError::Cobs) => 2,
+                Err(FrameError::Crc) => 3,
+                Err(FrameError::Decode) => 4,
+            };
+            outcomes[k] += 1;
+        }
+    }
+    assert!(
+        outcomes.iter().all(|&n| n > 0),
+        "ok/Overflow/Cobs/Crc/Decode: {outcomes:?}"
+    );
 }
 
 #[test]
@@ -160,9 +463,15 @@ fn loop_steps_only_on_fresh_input_and_watchdog_stops_motors() {
     assert!(m.m1.0 > 0);
 }
 
+/// A fresh `static` slot for [`crate::control_loop::load_model`] (leaked: tests only).
+fn slot() -> &'static mut LearnedModel {
+    Box::leak(Box::new(LearnedModel::new(ModelWeights::ZERO)))
+}
+
 #[test]
 fn bad_blob_keeps_motors_off() {
-    let err = crate::control_loop::load_model(b"not a blob").unwrap_err();
+    let slot = slot();
+    let err = crate::control_loop::load_model(b"not a blob", slot).unwrap_err();
     assert_eq!(err, hamflight::blob::BlobError::BadMagic);
     let mut l = ControlLoop::<crate::control_loop::Model>::new(Err(err));
     let mut m = motors();
@@ -173,8 +482,15 @@ fn bad_blob_keeps_motors_off() {
 }
 
 #[test]
-fn embedded_blob_passes_its_checks() {
-    assert!(crate::control_loop::load_model(crate::WEIGHT_BLOB).is_ok());
+fn embedded_blob_passes_its_checks_and_decodes_in_place() {
+    let model = crate::control_loop::load_model(crate::WEIGHT_BLOB, slot());
+    assert!(model.is_ok());
+    // The model flies the slot, which now holds exactly what decoding by value gives.
+    #[cfg(not(hamflight_untrained))]
+    assert_eq!(
+        model.map(|m| m.weights),
+        hamflight::blob::decode(crate::WEIGHT_BLOB)
+    );
 }
 
 #[test]
@@ -186,4 +502,198 @@ fn wire_state_round_trips() {
         w_body_rad_s: Vector3::new(-1.0, 0.5, 2.0),
     };
     assert_eq!(State::from(&WireState::from(&s)), s);
+}
+
+/// An input off the hover point (position, velocity and attitude errors), so that the
+/// adaptation law moves the estimate every step.
+fn off_input(seq: u32) -> Input {
+    let k = seq as f32;
+    let p = Vector3::new(0.0, 0.0, 0.5);
+    Input {
+        seq,
+        state: WireState::from(&State {
+            p_m: p + Vector3::new(0.05 + 0.001 * k, -0.03, 0.02),
+            rot: nalgebra::Rotation3::from_euler_angles(0.05, -0.03, 0.1).into_inner(),
+            v_body_m_s: Vector3::new(0.1, 0.0, -0.05),
+            w_body_rad_s: Vector3::new(0.2, -0.1, 0.05),
+        }),
+        setpoint: WireSetpoint::from(&Setpoint::hover(p, 0.0)),
+    }
+}
+
+/// Feeds `arrivals[k]` (an input or a dropped frame) at tick k into the loop, and steps a
+/// reference controller on the same states with `dt_of(ticks since its last step)`; returns
+/// the loop's and the reference's estimates after each step.
+fn fly_with_drops(
+    arrivals: &[Option<Input>],
+    dt_of: impl Fn(u32) -> f32,
+) -> Vec<([f32; 6], [f32; 6])> {
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let mut out = Vec::new();
+    let mut since: Option<u32> = None;
+    for arrival in arrivals {
+        since = since.map(|n| n + 1);
+        match arrival {
+            Some(input) => {
+                l.on_input(*input);
+                let TickOutcome::Stepped(t) = l.tick(&mut m, &mut NoCost) else {
+                    panic!("a fresh input must step")
+                };
+                let dt_s = dt_of(since.unwrap_or(1));
+                let r = reference.step(
+                    &State::from(&input.state),
+                    &Setpoint::from(&input.setpoint),
+                    dt_s,
+                );
+                assert!(!r.faults.is_fault(), "{:?}", r.faults);
+                since = Some(0);
+                let mut a = [0.0; 6];
+                a.iter_mut().zip(r.a.iter()).for_each(|(d, s)| *d = *s);
+                out.push((t.a, a));
+            }
+            None => assert_eq!(l.tick(&mut m, &mut NoCost), TickOutcome::Idle),
+        }
+    }
+    out
+}
+
+#[test]
+fn adaptation_integrates_the_real_time_across_dropped_frames() {
+    use crate::control_loop::DT_S;
+    // Ticks 0..12 with frames 3, 6, 7 and 9 dropped (gaps of 2 and 3 periods).
+    let dropped = [3, 6, 7, 9];
+    let arrivals: Vec<Option<Input>> = (0..12)
+        .map(|k| (!dropped.contains(&k)).then(|| off_input(k)))
+        .collect();
+    // The loop agrees exactly with a controller stepped with dt = ticks since the last step.
+    let real = fly_with_drops(&arrivals, |ticks| ticks as f32 * DT_S);
+    assert_eq!(real.len(), 8);
+    for (k, (fw, reference)) in real.iter().enumerate() {
+        assert_eq!(fw, reference, "step {k}");
+    }
+    // ...and not with one stepped with the fixed period (the old behaviour): the test bites.
+    let fixed = fly_with_drops(&arrivals, |_| DT_S);
+    let (fw, fixed_ref) = fixed.last().unwrap();
+    let diff = fw
+        .iter()
+        .zip(fixed_ref)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    assert!(diff > 1e-6, "estimates differ by only {diff}");
+    // Without drops the two agree: dt is the period.
+    let all: Vec<Option<Input>> = (0..12).map(|k| Some(off_input(k))).collect();
+    for (fw, reference) in fly_with_drops(&all, |_| DT_S) {
+        assert_eq!(fw, reference);
+    }
+}
+
+#[test]
+fn dt_follows_the_sequence_bounded_by_the_ticks() {
+    use crate::control_loop::{dt_for, DT_S};
+    // First state, or the first after a watchdog trip: one period.
+    assert_eq!(dt_for(None, 1), DT_S);
+    assert_eq!(dt_for(None, 5), DT_S);
+    // Consecutive states: one period, however many ticks the firmware waited (lock-step host).
+    assert_eq!(dt_for(Some(1), 1), DT_S);
+    assert_eq!(dt_for(Some(7), 1), DT_S);
+    // Lost states: the gap, bounded by the ticks that passed.
+    assert_eq!(dt_for(Some(3), 3), 3.0 * DT_S);
+    assert_eq!(dt_for(Some(2), 3), 2.0 * DT_S);
+    // Repeated, restarted (backwards) or jumping sequence: one period.
+    assert_eq!(dt_for(Some(3), 0), DT_S);
+    assert_eq!(dt_for(Some(3), 0u32.wrapping_sub(4)), DT_S);
+    assert_eq!(dt_for(Some(WATCHDOG_TICKS), WATCHDOG_TICKS + 1), DT_S);
+    // The longest dt is the watchdog timeout, inside the core's (0, 0.1] s.
+    assert_eq!(
+        dt_for(Some(u32::MAX), WATCHDOG_TICKS),
+        WATCHDOG_TICKS as f32 * DT_S
+    );
+    assert!(WATCHDOG_TICKS as f32 * DT_S <= 0.1);
+}
+
+/// Like [`fly_with_drops`], but with `ticks` timer ticks and inputs `(tick, seq)`.
+fn fly_schedule(
+    ticks: u32,
+    inputs: &[(u32, u32)],
+    dt_periods: &[u32],
+) -> (Vec<[f32; 6]>, Vec<[f32; 6]>) {
+    use crate::control_loop::DT_S;
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let (mut fw, mut re) = (Vec::new(), Vec::new());
+    let mut steps = 0;
+    for tick in 0..ticks {
+        if let Some(&(_, seq)) = inputs.iter().find(|(t, _)| *t == tick) {
+            let mut input = off_input(steps);
+            input.seq = seq;
+            l.on_input(input);
+            let r = reference.step(
+                &State::from(&input.state),
+                &Setpoint::from(&input.setpoint),
+                dt_periods[steps as usize] as f32 * DT_S,
+            );
+            let mut a = [0.0; 6];
+            a.iter_mut().zip(r.a.iter()).for_each(|(d, s)| *d = *s);
+            re.push(a);
+            steps += 1;
+        }
+        if let TickOutcome::Stepped(t) = l.tick(&mut m, &mut NoCost) {
+            fw.push(t.a);
+        }
+    }
+    (fw, re)
+}
+
+#[test]
+fn lock_step_host_gets_one_period_per_state_however_long_the_firmware_waits() {
+    // A state every third tick, consecutive seq (the PIL test's lock-step): dt = one period,
+    // the plant's step, not the three ticks the firmware idled.
+    let inputs: Vec<(u32, u32)> = (0..8).map(|k| (3 * k, 100 + k)).collect();
+    let (fw, re) = fly_schedule(24, &inputs, &[1; 8]);
+    assert_eq!(fw.len(), 8);
+    assert_eq!(fw, re);
+    // The same schedule with seq skipping by 3 (states lost on the link): three periods.
+    let inputs: Vec<(u32, u32)> = (0..8).map(|k| (3 * k, 3 * k)).collect();
+    let (fw, re) = fly_schedule(24, &inputs, &[1, 3, 3, 3, 3, 3, 3, 3]);
+    assert_eq!(fw, re);
+    // A sender that jumps seq by 5 while only 2 ticks pass: bounded by the ticks.
+    let inputs: Vec<(u32, u32)> = (0..6).map(|k| (2 * k, 5 * k)).collect();
+    let (fw, re) = fly_schedule(12, &inputs, &[1, 2, 2, 2, 2, 2]);
+    assert_eq!(fw, re);
+}
+
+#[test]
+fn dt_is_one_period_after_a_watchdog_trip() {
+    use crate::control_loop::DT_S;
+    // Through a trip: the first state after it integrates one period, not the whole gap.
+    let mut arrivals: Vec<Option<Input>> = vec![Some(off_input(0)), Some(off_input(1))];
+    arrivals.extend((0..WATCHDOG_TICKS + 5).map(|_| None));
+    arrivals.push(Some(off_input(2)));
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let mut last = None;
+    for arrival in &arrivals {
+        if let Some(input) = arrival {
+            l.on_input(*input);
+            let r = reference.step(
+                &State::from(&input.state),
+                &Setpoint::from(&input.setpoint),
+                DT_S,
+            );
+            last = Some(r.a);
+        }
+        let outcome = l.tick(&mut m, &mut NoCost);
+        if let (Some(_), TickOutcome::Stepped(t)) = (arrival, outcome) {
+            let a = last.unwrap();
+            assert!(t.a.iter().zip(a.iter()).all(|(x, y)| x == y));
+        }
+    }
+    assert_eq!(l.report().watchdog_trips, 1);
 }

@@ -21,11 +21,13 @@
 use crate::flight;
 use anyhow::{Context, Result};
 use clap::Args;
-use hamflight::{Faults, Setpoint, State};
-use nalgebra::{Matrix3, Vector3};
-use serde::{Deserialize, Serialize};
+use hamflight::Faults;
+use serde::Serialize;
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
+
+mod wire;
+pub use wire::{parse_request, Request, SetpointMsg};
 
 /// Arguments of `host-train bridge`.
 #[derive(Args, Debug, Clone)]
@@ -39,48 +41,6 @@ pub struct BridgeArgs {
     /// Tick length (s) assumed for the first request.
     #[arg(long, default_value_t = 0.002)]
     pub dt: f64,
-}
-
-/// The setpoint part of a request.
-#[derive(Deserialize, Debug, Clone)]
-#[serde(deny_unknown_fields)]
-pub struct SetpointMsg {
-    /// Desired position (m, world).
-    pub p: [f64; 3],
-    /// Desired velocity (m/s, world).
-    #[serde(default)]
-    pub v: [f64; 3],
-    /// Desired acceleration (m/s², world).
-    #[serde(default)]
-    pub a: [f64; 3],
-    /// Desired jerk (m/s³, world).
-    #[serde(default)]
-    pub j: [f64; 3],
-    /// Desired yaw (rad).
-    #[serde(default)]
-    pub yaw: f64,
-    /// Desired yaw rate (rad/s).
-    #[serde(default)]
-    pub yaw_rate: f64,
-}
-
-/// One request line.
-#[derive(Deserialize, Debug, Clone)]
-#[serde(deny_unknown_fields)]
-pub struct Request {
-    /// Time (s).
-    pub t: f64,
-    /// Position (m, world).
-    pub p: [f64; 3],
-    /// Rotation body→world, row-major.
-    #[serde(rename = "R")]
-    pub r: [[f64; 3]; 3],
-    /// Linear velocity (m/s, body frame).
-    pub v: [f64; 3],
-    /// Angular velocity (rad/s, body frame).
-    pub w: [f64; 3],
-    /// The setpoint.
-    pub setpoint: SetpointMsg,
 }
 
 /// Fault flags in a reply.
@@ -135,37 +95,6 @@ pub struct Reply {
     pub faults: FaultsMsg,
 }
 
-impl Request {
-    /// The core's state and setpoint.
-    pub fn to_core(&self) -> (State, Setpoint) {
-        let v3 = |a: [f64; 3]| Vector3::new(a[0] as f32, a[1] as f32, a[2] as f32);
-        let r = Matrix3::from_fn(|i, j| {
-            self.r
-                .get(i)
-                .and_then(|row| row.get(j))
-                .copied()
-                .unwrap_or(f64::NAN) as f32
-        });
-        let s = &self.setpoint;
-        (
-            State {
-                p_m: v3(self.p),
-                rot: r,
-                v_body_m_s: v3(self.v),
-                w_body_rad_s: v3(self.w),
-            },
-            Setpoint {
-                p_m: v3(s.p),
-                v_m_s: v3(s.v),
-                a_m_s2: v3(s.a),
-                j_m_s3: v3(s.j),
-                yaw_rad: s.yaw as f32,
-                yaw_rate_rad_s: s.yaw_rate as f32,
-            },
-        )
-    }
-}
-
 /// Serve requests from `input` until end of file, writing replies to `output`.
 pub fn serve(
     ctrl: &mut dyn flight::CoreStep,
@@ -174,12 +103,25 @@ pub fn serve(
     mut output: impl Write,
 ) -> Result<()> {
     let mut last_t: Option<f64> = None;
-    for (n, line) in input.lines().enumerate() {
-        let line = line.context("cannot read stdin")?;
+    // Lines as bytes: a line that is not UTF-8 gets an error reply like any other bad line
+    // (`BufRead::lines` would end the stream on it).
+    for (n, line) in input.split(b'\n').enumerate() {
+        let bytes = line.context("cannot read stdin")?;
+        let bytes = bytes.strip_suffix(b"\r").unwrap_or(&bytes);
+        let line = match std::str::from_utf8(bytes) {
+            Ok(line) => line,
+            Err(e) => {
+                let msg = format!("line {}: not UTF-8 ({e})", n + 1);
+                writeln!(output, "{}", serde_json::json!({ "error": msg }))
+                    .context("cannot write stdout")?;
+                output.flush().context("cannot write stdout")?;
+                continue;
+            }
+        };
         if line.trim().is_empty() {
             continue;
         }
-        let text = match serde_json::from_str::<Request>(&line) {
+        let text = match parse_request(line) {
             Ok(req) => {
                 let dt = last_t.map_or(first_dt_s, |t0| req.t - t0);
                 last_t = Some(req.t);

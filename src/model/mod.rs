@@ -109,8 +109,26 @@ impl ModelWeights {
     /// Total multiply–adds of one forward pass of the three networks.
     pub const MACS: usize = InertiaNet::MACS + GainNet::MACS + DisturbanceNet::MACS;
 
+    /// Number of parameters (f32) of the three networks.
+    pub const PARAMS: usize = InertiaNet::PARAMS + GainNet::PARAMS + DisturbanceNet::PARAMS;
+
+    /// All-zero networks, as a constant (a `static` of it lives in `.bss`).
+    pub const ZERO: Self = Self {
+        inertia: Mlp::ZERO,
+        gain: Mlp::ZERO,
+        disturbance: Mlp::ZERO,
+    };
+
     /// True if every parameter is finite.
     pub fn is_finite(&self) -> bool {
         self.inertia.is_finite() && self.gain.is_finite() && self.disturbance.is_finite()
+    }
+
+    /// Every parameter in blob order: J⁻¹, g, W networks, each as [`Mlp::params_mut`].
+    pub fn params_mut(&mut self) -> impl Iterator<Item = &mut f32> {
+        self.inertia
+            .params_mut()
+            .chain(self.gain.params_mut())
+            .chain(self.disturbance.params_mut())
     }
 }

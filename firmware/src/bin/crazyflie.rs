@@ -6,14 +6,18 @@
 
 use cortex_m_rt::entry;
 use defmt_rtt as _;
-use hamflight_firmware::runtime;
+use hamflight_firmware::runtime::{self, Board, Counter, IsrCell, LinkReceiver};
 use panic_probe as _;
 use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::serial::{config::Config, Serial};
+use stm32f4xx_hal::serial::{config::Config, Rx, Serial};
 
 /// Link baud rate: an Input frame is ~145 bytes, 500 of them a second need ~730 kbit/s.
 const LINK_BAUD: u32 = 1_000_000;
+
+/// The link's receiver: deck connector UART1 = USART3 (PC10 TX / PC11 RX; USART6 is the nRF51
+/// syslink).
+static LINK: IsrCell<LinkReceiver<Rx<pac::USART3>>> = IsrCell::new();
 
 #[entry]
 fn main() -> ! {
@@ -51,8 +55,14 @@ fn main() -> ! {
         Err(_) => defmt::panic!("USART3 cannot run at {} baud", LINK_BAUD),
     };
     let (mut tx, rx) = serial.split();
+    LINK.init_with(|| LinkReceiver::new(rx));
 
-    let boot = runtime::init(motors, rx, dp.TIM5, clocks.timclk1().raw(), &mut cp);
+    let board = Board {
+        link_irq: pac::Interrupt::USART3,
+        timer_clock_hz: clocks.timclk1().raw(),
+        counter: Counter::Dwt,
+    };
+    let boot = runtime::init(motors, dp.TIM5, board, &mut cp);
     runtime::repaint_stack();
     match boot.blob {
         Ok(()) => defmt::info!(
@@ -69,7 +79,7 @@ fn main() -> ! {
 
 #[interrupt]
 fn USART3() {
-    runtime::on_rx();
+    runtime::on_rx(&LINK);
 }
 
 #[interrupt]

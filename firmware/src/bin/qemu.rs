@@ -10,13 +10,16 @@
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
-use hamflight_firmware::runtime;
+use hamflight_firmware::runtime::{self, Board, Counter, IsrCell, LinkReceiver};
 use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::serial::{config::Config, Serial};
+use stm32f4xx_hal::serial::{config::Config, Rx, Serial};
 
 /// QEMU's STM32F405 timers count at this fixed clock, whatever the RCC says.
 const QEMU_TIMER_CLOCK_HZ: u32 = 48_000_000;
+
+/// The link's receiver: USART1, which QEMU connects to the first `-serial`.
+static LINK: IsrCell<LinkReceiver<Rx<pac::USART1>>> = IsrCell::new();
 
 #[entry]
 fn main() -> ! {
@@ -44,8 +47,15 @@ fn main() -> ! {
         fail("USART1 set-up failed")
     };
     let (mut tx, rx) = serial.split();
+    LINK.init_with(|| LinkReceiver::new(rx));
 
-    let boot = runtime::init(motors, rx, dp.TIM5, QEMU_TIMER_CLOCK_HZ, &mut cp);
+    let board = Board {
+        link_irq: pac::Interrupt::USART1,
+        timer_clock_hz: QEMU_TIMER_CLOCK_HZ,
+        // DWT's cycle counter reads 0 under QEMU.
+        counter: Counter::SysTick,
+    };
+    let boot = runtime::init(motors, dp.TIM5, board, &mut cp);
     runtime::repaint_stack();
     match boot.blob {
         Ok(()) => hprintln!(
@@ -165,7 +175,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 
 #[interrupt]
 fn USART1() {
-    runtime::on_rx();
+    runtime::on_rx(&LINK);
 }
 
 #[interrupt]

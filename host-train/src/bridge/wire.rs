@@ -1,0 +1,89 @@
+//! The bridge's request line: its JSON form, the parser and the conversion to the core's types.
+//!
+//! Self-contained (only `hamflight`, `nalgebra`, `serde`, `serde_json`), so that the fuzz target
+//! `fuzz/fuzz_targets/bridge_line.rs` compiles this very file (`#[path]`) without the host crate.
+
+use hamflight::{Setpoint, State};
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+
+/// The setpoint part of a request.
+#[derive(Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct SetpointMsg {
+    /// Desired position (m, world).
+    pub p: [f64; 3],
+    /// Desired velocity (m/s, world).
+    #[serde(default)]
+    pub v: [f64; 3],
+    /// Desired acceleration (m/s², world).
+    #[serde(default)]
+    pub a: [f64; 3],
+    /// Desired jerk (m/s³, world).
+    #[serde(default)]
+    pub j: [f64; 3],
+    /// Desired yaw (rad).
+    #[serde(default)]
+    pub yaw: f64,
+    /// Desired yaw rate (rad/s).
+    #[serde(default)]
+    pub yaw_rate: f64,
+}
+
+/// One request line.
+#[derive(Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct Request {
+    /// Time (s).
+    pub t: f64,
+    /// Position (m, world).
+    pub p: [f64; 3],
+    /// Rotation body→world, row-major.
+    #[serde(rename = "R")]
+    pub r: [[f64; 3]; 3],
+    /// Linear velocity (m/s, body frame).
+    pub v: [f64; 3],
+    /// Angular velocity (rad/s, body frame).
+    pub w: [f64; 3],
+    /// The setpoint.
+    pub setpoint: SetpointMsg,
+}
+
+/// Parses one request line (JSON; unknown fields are errors).
+///
+/// # Errors
+/// serde_json's error, with the column where the line stops making sense.
+pub fn parse_request(line: &str) -> Result<Request, serde_json::Error> {
+    serde_json::from_str(line)
+}
+
+impl Request {
+    /// The core's state and setpoint.
+    pub fn to_core(&self) -> (State, Setpoint) {
+        let v3 = |a: [f64; 3]| Vector3::new(a[0] as f32, a[1] as f32, a[2] as f32);
+        let r = Matrix3::from_fn(|i, j| {
+            self.r
+                .get(i)
+                .and_then(|row| row.get(j))
+                .copied()
+                .unwrap_or(f64::NAN) as f32
+        });
+        let s = &self.setpoint;
+        (
+            State {
+                p_m: v3(self.p),
+                rot: r,
+                v_body_m_s: v3(self.v),
+                w_body_rad_s: v3(self.w),
+            },
+            Setpoint {
+                p_m: v3(s.p),
+                v_m_s: v3(s.v),
+                a_m_s2: v3(s.a),
+                j_m_s3: v3(s.j),
+                yaw_rad: s.yaw as f32,
+                yaw_rate_rad_s: s.yaw_rate as f32,
+            },
+        )
+    }
+}

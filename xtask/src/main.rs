@@ -1,0 +1,87 @@
+//! `cargo xtask JOB`: the jobs behind the aliases in `.cargo/config.toml` that are more than one
+//! cargo command. std only, so it builds in a second.
+//!
+//! - `fw-build`: builds every firmware binary with every feature set the READMEs mention
+//!   ([`FIRMWARE_FEATURE_SETS`]; `--bins` skips a binary whose required features are off).
+//! - `fw-report`: `firmware/report.sh` (cost and size table under QEMU), arguments passed on.
+//!
+//! Both first make sure the thumbv7em target is installed (`firmware/tools/ensure-target.sh`).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+
+/// Every firmware feature set the READMEs mention (`.ci/run` builds them through `cargo fw-build`).
+const FIRMWARE_FEATURE_SETS: [&str; 6] = [
+    "",
+    "loop-1khz",
+    "qemu",
+    "qemu,bench",
+    "qemu,loop-1khz",
+    "qemu,bench,loop-1khz",
+];
+
+fn firmware_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware")
+}
+
+/// A command run in `firmware/` without the outer cargo's settings (the firmware is its own
+/// workspace, with its own target and toolchain file).
+fn in_firmware(program: &str) -> Command {
+    let mut cmd = Command::new(program);
+    cmd.current_dir(firmware_dir());
+    for var in [
+        "RUSTUP_TOOLCHAIN",
+        "CARGO_BUILD_TARGET",
+        "RUSTFLAGS",
+        "CARGO_ENCODED_RUSTFLAGS",
+        "CARGO_MAKEFLAGS",
+    ] {
+        cmd.env_remove(var);
+    }
+    cmd
+}
+
+fn run(mut cmd: Command) -> Result<(), String> {
+    let shown = format!("{cmd:?}");
+    match cmd.status() {
+        Ok(s) if s.success() => Ok(()),
+        Ok(s) => Err(format!("{shown} failed ({s})")),
+        Err(e) => Err(format!("cannot run {shown}: {e}")),
+    }
+}
+
+fn fw_build() -> Result<(), String> {
+    run(in_firmware("tools/ensure-target.sh"))?;
+    for features in FIRMWARE_FEATURE_SETS {
+        eprintln!("firmware: cargo build --release --bins --features '{features}'");
+        let mut cmd = in_firmware("cargo");
+        cmd.args(["build", "--release", "--bins", "--features", features]);
+        run(cmd)?;
+    }
+    Ok(())
+}
+
+fn fw_report(args: &[String]) -> Result<(), String> {
+    let mut cmd = in_firmware("./report.sh");
+    cmd.args(args);
+    run(cmd)
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.split_first() {
+        Some((job, rest)) if job == "fw-build" && rest.is_empty() => fw_build(),
+        Some((job, rest)) if job == "fw-report" => fw_report(rest),
+        _ => Err(format!(
+            "usage: cargo xtask fw-build | fw-report (got {args:?}); \
+             the aliases are in .cargo/config.toml"
+        )),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
