@@ -108,7 +108,8 @@ pub enum AdaptationLaw {
     /// The paper's gradient law on the tracking errors (eq. `geometric_adaptive_law`).
     #[default]
     Gradient,
-    /// The gradient law plus the prediction-error (Kalman-gain) term.
+    /// The gradient law plus the prediction-error (Kalman-gain) term (feature `composite`).
+    #[cfg(feature = "composite")]
     Composite,
 }
 
@@ -205,6 +206,7 @@ pub struct PredictionInput<'a> {
 
 /// The composite law's memory between ticks.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(not(feature = "composite"), allow(dead_code))]
 struct PredictionState {
     /// v and ω of the previous tick.
     prev_v: Vector3<f32>,
@@ -235,7 +237,11 @@ pub struct Adaptation {
 }
 
 fn clip(v: &Vector3<f32>, max: f32) -> Vector3<f32> {
-    let n = v.norm();
+    // The default (no clipping) skips the norm: the same result, fewer instructions a tick.
+    if max == f32::INFINITY {
+        return *v;
+    }
+    let n = crate::fpu::sqrt(v.norm_squared());
     if n > max && n > 0.0 {
         v * (max / n)
     } else {
@@ -266,15 +272,26 @@ impl Adaptation {
     ) -> SVector<f32, FEATURES> {
         let lin = err.e_p * rates.c_p + err.e_v * rates.c_v;
         let ang = err.e_r * rates.c_r + err.e_w * rates.c_w;
-        let x = err.e_p.norm() / rates.soft_freeze_m;
-        // x is NaN only for 0/0 or ∞/∞ (soft_freeze_m of 0 or ∞ with such an error): no weight.
-        let weight = if x.is_finite() {
-            1.0 / (1.0 + x * x)
-        } else {
+        // The default (no soft freeze) gives weight 1 exactly; skip its norm and division.
+        let weight = if rates.soft_freeze_m == f32::INFINITY {
             1.0
+        } else {
+            let x = crate::fpu::sqrt(err.e_p.norm_squared()) / rates.soft_freeze_m;
+            // x is NaN only for 0/0 or ∞/∞ (soft_freeze_m of 0 or ∞ with such an error): no
+            // weight.
+            if x.is_finite() {
+                1.0 / (1.0 + x * x)
+            } else {
+                1.0
+            }
         };
-        let lin = clip(&lin, rates.c_p.abs() * rates.drive_max_m) * weight;
-        let ang = clip(&ang, rates.c_r.abs() * rates.drive_max_rad) * weight;
+        let lin = clip(&lin, rates.c_p.abs() * rates.drive_max_m);
+        let ang = clip(&ang, rates.c_r.abs() * rates.drive_max_rad);
+        let (lin, ang) = if weight == 1.0 {
+            (lin, ang)
+        } else {
+            (lin * weight, ang * weight)
+        };
         let s = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
         features.transpose() * s
     }
@@ -296,7 +313,7 @@ impl Adaptation {
         if !finite(&next) {
             return;
         }
-        let n = next.norm();
+        let n = crate::fpu::sqrt(next.norm_squared());
         self.a = if n > a_max && n > 0.0 {
             next * (a_max / n)
         } else {
@@ -319,6 +336,7 @@ impl Adaptation {
     /// and the features, then the Kalman update of a and P (module docs). Call once per tick
     /// with the state's terms, before [`Adaptation::record_input`]. Returns the prediction error
     /// (a's units) when an update ran.
+    #[cfg(feature = "composite")]
     pub fn predict_step(
         &mut self,
         gains: &CompositeGains,
@@ -394,6 +412,7 @@ impl Adaptation {
         self.kalman(gains, a_max, dt_s)
     }
 
+    #[cfg(feature = "composite")]
     fn kalman(&mut self, g: &CompositeGains, a_max: f32, dt_s: f32) -> Option<Vector6<f32>> {
         type M6 = SMatrix<f32, FEATURES, FEATURES>;
         let h = self.pred.h_f;

@@ -15,9 +15,10 @@
 //! torques): for the true g it is exactly the pseudo-inverse, and for a learned g it keeps model
 //! error in the unactuated rows from leaking into the torques.
 
+#[cfg(feature = "composite")]
+use crate::adapt::PredictionInput;
 use crate::adapt::{
-    Adaptation, AdaptationLaw, AdaptationRates, CompositeGains, Measurement, PredictionInput,
-    TrackingError,
+    Adaptation, AdaptationLaw, AdaptationRates, CompositeGains, Measurement, TrackingError,
 };
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
@@ -200,7 +201,9 @@ pub struct FlightController<M> {
     adaptation: Adaptation,
     /// The composite law's compensation feedforward: the last world compensation force R (W a)_v
     /// (N) and its low-passed rate (N/s).
+    #[cfg_attr(not(feature = "composite"), allow(dead_code))]
     comp_prev_n: Option<Vector3<f32>>,
+    #[cfg_attr(not(feature = "composite"), allow(dead_code))]
     comp_rate_n_s: Vector3<f32>,
     /// `gains.max_tilt_rad` with its cosine and sine, refreshed when the gain changes.
     tilt: TiltLimit,
@@ -271,6 +274,9 @@ impl<M: HamiltonianModel> FlightController<M> {
         meas: &Measurement,
         dt_s: f32,
     ) -> Output {
+        // Without the composite law nothing reads the measurement.
+        #[cfg(not(feature = "composite"))]
+        let _ = meas;
         let mut faults = Faults {
             bad_state: !(state.is_finite() && is_rotation(&state.rot)),
             bad_setpoint: !sp.is_finite(),
@@ -309,7 +315,9 @@ impl<M: HamiltonianModel> FlightController<M> {
         // Desired attitude from the force the law wants. Its rate Ḟ ≈ m p⃛*, and with the
         // composite law also minus the rate of the compensation R (W a)_v, so that the attitude
         // loop is told ahead how the thrust axis must turn to follow a changing disturbance.
+        #[cfg_attr(not(feature = "composite"), allow(unused_mut))]
         let mut f_dot = sp.j_m_s3 * m;
+        #[cfg(feature = "composite")]
         if g.adapt && g.law == AdaptationLaw::Composite && g.composite.feedforward_tau_s > 0.0 {
             let comp = r * wa_v;
             if let Some(prev) = self.comp_prev_n {
@@ -370,6 +378,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         // so the estimate does not wind up on an unreachable demand. The composite law's
         // prediction term compares with the wrench actually delivered, so it keeps running.
         if g.adapt {
+            #[cfg(feature = "composite")]
             if g.law == AdaptationLaw::Composite {
                 let x = PredictionInput {
                     features: &t.features,
@@ -388,6 +397,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             if !(sat.roll_pitch || sat.thrust) {
                 self.adaptation.step(&g.rates, &t.features, &errors, dt_s);
             }
+            #[cfg(feature = "composite")]
             self.adaptation
                 .record_input(&self.airframe.wrench(&rotors.thrust_n));
         }
@@ -402,7 +412,9 @@ impl<M: HamiltonianModel> FlightController<M> {
 }
 
 fn errors_finite(e: &TrackingError) -> bool {
-    [e.e_p, e.e_v, e.e_r, e.e_w]
-        .iter()
-        .all(|v| v.iter().all(|x| x.is_finite()))
+    crate::fpu::all_finite(
+        [e.e_p, e.e_v, e.e_r, e.e_w]
+            .iter()
+            .flat_map(|v| v.iter().copied()),
+    )
 }

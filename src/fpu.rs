@@ -45,6 +45,14 @@ pub fn sqrt(x: f32) -> f32 {
     }
 }
 
+/// True if every value is finite: Σ 0·xᵢ is ±0 for finite values and NaN as soon as one is NaN
+/// or infinite, so the whole check is one multiply–add a value and one comparison, without a
+/// branch per value (IEEE arithmetic: the compiler may not fold 0·x).
+#[inline]
+pub fn all_finite(values: impl IntoIterator<Item = f32>) -> bool {
+    values.into_iter().fold(0.0f32, |acc, x| acc + x * 0.0) == 0.0
+}
+
 /// Targets with a single-precision FPU that has `vfma` (FPv4-SP and later, hard-float ABI).
 #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
 mod m4f {

@@ -41,11 +41,12 @@ impl Setpoint {
 
     /// True if every component is finite.
     pub fn is_finite(&self) -> bool {
-        [self.p_m, self.v_m_s, self.a_m_s2, self.j_m_s3]
-            .iter()
-            .all(|v| v.iter().all(|x| x.is_finite()))
-            && self.yaw_rad.is_finite()
-            && self.yaw_rate_rad_s.is_finite()
+        crate::fpu::all_finite(
+            [self.p_m, self.v_m_s, self.a_m_s2, self.j_m_s3]
+                .iter()
+                .flat_map(|v| v.iter().copied())
+                .chain([self.yaw_rad, self.yaw_rate_rad_s]),
+        )
     }
 }
 

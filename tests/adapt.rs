@@ -1,6 +1,8 @@
 //! The composite law's prediction term on synthetic data: it converges to the true weights, its
 //! gain P stays symmetric, positive definite and bounded in f32, and bad measurements leave the
 //! estimate alone.
+// The composite law is behind the core's default `composite` feature.
+#![cfg(feature = "composite")]
 
 use hamflight::adapt::{Adaptation, CompositeGains, Measurement, PredictionInput, TORQUE_UNIT_NM};
 use hamflight::mixer::Wrench;

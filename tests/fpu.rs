@@ -102,3 +102,25 @@ fn dense_forward_is_the_fused_chain_and_close_to_f64() {
         }
     }
 }
+
+#[test]
+fn all_finite_finds_every_nan_and_infinity() {
+    let base = [
+        0.0f32,
+        -0.0,
+        1.0,
+        -3.0e38,
+        1e-45,
+        f32::MAX,
+        f32::MIN_POSITIVE,
+    ];
+    assert!(fpu::all_finite(base));
+    assert!(fpu::all_finite([]));
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
+        for pos in 0..=base.len() {
+            let mut v = base.to_vec();
+            v.insert(pos, bad);
+            assert!(!fpu::all_finite(v.iter().copied()), "{bad} at {pos}");
+        }
+    }
+}

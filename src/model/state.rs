@@ -29,10 +29,14 @@ impl Default for State {
 impl State {
     /// True if every component is finite.
     pub fn is_finite(&self) -> bool {
-        self.p_m.iter().all(|v| v.is_finite())
-            && self.rot.iter().all(|v| v.is_finite())
-            && self.v_body_m_s.iter().all(|v| v.is_finite())
-            && self.w_body_rad_s.iter().all(|v| v.is_finite())
+        crate::fpu::all_finite(
+            self.p_m
+                .iter()
+                .chain(self.rot.iter())
+                .chain(self.v_body_m_s.iter())
+                .chain(self.w_body_rad_s.iter())
+                .copied(),
+        )
     }
 
     /// The generalized coordinates q = [p; r₁; r₂; r₃] with rᵢ the rows of R (paper Sec. 2).
