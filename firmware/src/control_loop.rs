@@ -182,9 +182,24 @@ pub struct ControlLoop<M> {
     total_cost: u64,
 }
 
+/// The core's default gains; with the `composite` feature, the composite adaptation law.
+pub fn default_gains() -> Gains {
+    #[cfg(feature = "composite")]
+    {
+        Gains {
+            law: hamflight::AdaptationLaw::Composite,
+            ..Gains::default()
+        }
+    }
+    #[cfg(not(feature = "composite"))]
+    {
+        Gains::default()
+    }
+}
+
 impl<M: HamiltonianModel> ControlLoop<M> {
     /// A loop on `model` (or on the reason the model could not be loaded: then the motors stay
-    /// off) with the core's default gains.
+    /// off) with [`default_gains`].
     pub fn new(model: Result<M, BlobError>) -> Self {
         let status = if model.is_ok() {
             LinkStatus::WaitingForState
@@ -192,7 +207,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             LinkStatus::BadBlob
         };
         Self {
-            controller: model.map(|m| FlightController::new(m, Gains::default())),
+            controller: model.map(|m| FlightController::new(m, default_gains())),
             latest: None,
             ticks_since_used: None,
             last_used_seq: 0,

@@ -21,6 +21,10 @@ pub const SETTLE_S: f64 = 4.0;
 /// The frequencies of issue 13's table (Hz).
 pub const FREQUENCIES_HZ: [f64; 4] = [0.25, 0.5, 1.0, 2.0];
 
+/// One tick of a tracked flight: t (s), the true wind and the compensated specific force
+/// R (W a)_v / m (both m/s², world frame).
+pub type DisturbanceSample = (f64, Vector3<f64>, Vector3<f64>);
+
 /// One point of the estimator's frequency response.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BandwidthPoint {
@@ -60,7 +64,7 @@ pub fn sine_wind_scenario(frequency_hz: f64) -> Result<Scenario> {
 pub fn track_disturbance<M: HamiltonianModel>(
     sc: &Scenario,
     ctrl: &mut CoreController<M>,
-) -> Vec<(f64, Vector3<f64>, Vector3<f64>)> {
+) -> Vec<DisturbanceSample> {
     ctrl.reset();
     let mut plant = sc.plant();
     let mut rng = ChaCha8Rng::seed_from_u64(sc.spec.seed);
@@ -164,7 +168,7 @@ pub struct TrackedLaw {
     pub rms_error_m_s2: f64,
     /// Per tick: t (s), true wind (m/s², world), compensated specific force R (W a)_v / m.
     #[serde(skip)]
-    pub trace: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
+    pub trace: Vec<DisturbanceSample>,
 }
 
 /// `host-train track`: both laws on one scenario, estimate against truth.
@@ -254,7 +258,7 @@ pub fn run_track(args: &TrackArgs) -> Result<TrackReport> {
     };
     std::fs::create_dir_all(&args.out)
         .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", args.out.display()))?;
-    let series: Vec<(&str, &[(f64, Vector3<f64>, Vector3<f64>)])> = report
+    let series: Vec<(&str, &[DisturbanceSample])> = report
         .laws
         .iter()
         .map(|l| (l.law.as_str(), l.trace.as_slice()))

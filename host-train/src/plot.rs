@@ -6,6 +6,7 @@ use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
+use crate::estimator::DisturbanceSample;
 use crate::flightlog::FlightLog;
 use crate::fsutil::write_atomic;
 
@@ -275,10 +276,7 @@ pub fn adaptation_svg(label: &str, log: &FlightLog, path: &Path) -> Result<()> {
 /// specific force R (W a)_v / m and of the wind (m/s²) against time, one line per law.
 pub fn disturbance_svg(
     title: &str,
-    series: &[(
-        &str,
-        &[(f64, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)],
-    )],
+    series: &[(&str, &[DisturbanceSample])],
     path: &Path,
 ) -> Result<()> {
     let mut buf = String::new();
@@ -313,9 +311,7 @@ pub fn disturbance_svg(
                 .draw()
                 .map_err(pe)?;
             // At most ~3,000 points a line: the figure stays small and the lines unchanged.
-            let every = |s: &[(f64, nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)]| {
-                (s.len() / 3000).max(1)
-            };
+            let every = |s: &[DisturbanceSample]| (s.len() / 3000).max(1);
             if let Some((_, s)) = series.first() {
                 ch.draw_series(LineSeries::new(
                     s.iter().step_by(every(s)).map(|(t, d, _)| (*t, d[axis])),

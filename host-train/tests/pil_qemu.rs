@@ -18,7 +18,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
-use hamflight::{FlightController, Gains};
+use hamflight::{AdaptationLaw, FlightController, Gains};
 use host_train::controller::{Controller, TrajectoryPoint};
 use host_train::eval::{fly, Report};
 use host_train::plant::PlantState;
@@ -95,12 +95,27 @@ fn qemu_available() -> bool {
         .unwrap_or(false)
 }
 
-/// Builds the QEMU firmware (release) in its own workspace and returns the ELF.
-fn build_firmware() -> PathBuf {
+/// Builds the QEMU firmware (release) in its own workspace and returns the ELF. With
+/// `composite`, the image flies the composite adaptation law (firmware feature `composite`),
+/// built in a target directory of its own so that both tests can build side by side.
+fn build_firmware(composite: bool) -> PathBuf {
     let dir = repo().join("firmware");
+    let (features, target) = if composite {
+        ("qemu,composite", dir.join("target/pil-composite"))
+    } else {
+        ("qemu", dir.join("target"))
+    };
     let mut cmd = Command::new("cargo");
-    cmd.current_dir(&dir)
-        .args(["build", "--release", "--features", "qemu", "--bin", "qemu"]);
+    cmd.current_dir(&dir).args([
+        "build",
+        "--release",
+        "--features",
+        features,
+        "--bin",
+        "qemu",
+        "--target-dir",
+    ]);
+    cmd.arg(&target);
     // The outer cargo's settings must not leak into the firmware's own workspace.
     for var in [
         "CARGO_TARGET_DIR",
@@ -125,9 +140,9 @@ fn build_firmware() -> PathBuf {
     };
     assert!(
         out.status.success(),
-        "firmware build failed (cd firmware && cargo build --release --features qemu --bin qemu):\n{stderr}{hint}"
+        "firmware build failed (cd firmware && cargo build --release --features {features} --bin qemu):\n{stderr}{hint}"
     );
-    dir.join("target/thumbv7em-none-eabihf/release/qemu")
+    target.join("thumbv7em-none-eabihf/release/qemu")
 }
 
 /// QEMU with its output collected; killed on drop.
@@ -317,6 +332,26 @@ const INSTALL_QEMU: &str = "install it with `apt-get install qemu-system-arm` (D
     ignore = "qemu-system-arm not found on PATH at build time; install it with `apt-get install qemu-system-arm` (Debian/Ubuntu), then rerun"
 )]
 fn paper_spiral_on_qemu_matches_native() {
+    pil_flight(AdaptationLaw::Gradient);
+}
+
+/// The same with the composite adaptation law on both sides (no accelerometer on the link: both
+/// difference the velocity), issue 13's "bit-identical to native".
+#[test]
+#[cfg_attr(
+    hamflight_no_qemu,
+    ignore = "qemu-system-arm not found on PATH at build time; install it with `apt-get install qemu-system-arm` (Debian/Ubuntu), then rerun"
+)]
+fn composite_law_on_qemu_matches_native() {
+    pil_flight(AdaptationLaw::Composite);
+}
+
+fn pil_flight(law: AdaptationLaw) {
+    let composite = law == AdaptationLaw::Composite;
+    let gains = Gains {
+        law,
+        ..Gains::default()
+    };
     assert!(
         qemu_available(),
         "qemu-system-arm is not installed, so the processor-in-the-loop test cannot run; {INSTALL_QEMU}"
@@ -329,7 +364,7 @@ fn paper_spiral_on_qemu_matches_native() {
     scenario.spec.duration_s = scenario.spec.duration_s.min(pil_seconds());
     assert!(scenario.spec.duration_s >= 10.0);
 
-    let elf = build_firmware();
+    let elf = build_firmware(composite);
     let listener = TcpListener::bind("127.0.0.1:0").expect("bind a local port for the UART");
     let port = listener.local_addr().expect("local addr").port();
     let mut qemu = Qemu::start(&elf, port);
@@ -409,7 +444,7 @@ fn paper_spiral_on_qemu_matches_native() {
     let log_host = match hello.model {
         ModelKind::Nominal => {
             let mut native = NativeController {
-                inner: FlightController::new(NominalModel::default(), Gains::default()),
+                inner: FlightController::new(NominalModel::default(), gains),
                 dt_s,
             };
             fly(&scenario, &mut native)
@@ -427,7 +462,7 @@ fn paper_spiral_on_qemu_matches_native() {
             let model =
                 LearnedModel::from_blob(&blob).unwrap_or_else(|e| panic!("{}: {e}", wp.display()));
             let mut native = NativeController {
-                inner: FlightController::new(model, Gains::default()),
+                inner: FlightController::new(model, gains),
                 dt_s,
             };
             fly(&scenario, &mut native)
@@ -452,7 +487,7 @@ fn paper_spiral_on_qemu_matches_native() {
     let mean = insns.iter().sum::<f64>() / insns.len().max(1) as f64;
     let max = insns.iter().copied().fold(0.0, f64::max);
     println!(
-        "PIL paper-spiral {:.1} s, {:?} model: {} steps, max |p_qemu - p_host| = {:.3e} m, \
+        "PIL paper-spiral {:.1} s, {:?} model, {law:?} law: {} steps, max |p_qemu - p_host| = {:.3e} m, \
          RMSE(t>=5 s) qemu {:.4} m / host {:.4} m, whole {:.4} / {:.4} m",
         scenario.spec.duration_s,
         hello.model,
@@ -487,6 +522,12 @@ fn paper_spiral_on_qemu_matches_native() {
     assert!(
         max_dev <= 1e-3,
         "flown path differs from the native run by {max_dev:.3e} m (> 1 mm)"
+    );
+    // Same code, same IEEE operations (the M4F's vfma/vsqrt round as the host's fma/sqrt do):
+    // the paths must agree to the bit, not just within the millimetre above.
+    assert!(
+        max_dev == 0.0,
+        "the firmware is not bit-identical to the host build: paths differ by {max_dev:.3e} m"
     );
     assert!(
         r_fw.rmse_pos_m <= r_host.rmse_pos_m + 1e-4,

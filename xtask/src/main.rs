@@ -11,13 +11,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
 /// Every firmware feature set the READMEs mention (`.ci/run` builds them through `cargo fw-build`).
-const FIRMWARE_FEATURE_SETS: [&str; 6] = [
+const FIRMWARE_FEATURE_SETS: [&str; 8] = [
     "",
     "loop-1khz",
+    "composite",
     "qemu",
     "qemu,bench",
     "qemu,loop-1khz",
     "qemu,bench,loop-1khz",
+    "qemu,composite",
 ];
 
 fn firmware_dir() -> PathBuf {
