@@ -126,7 +126,7 @@ pub fn serve(
                 let dt = last_t.map_or(first_dt_s, |t0| req.t - t0);
                 last_t = Some(req.t);
                 let (state, sp) = req.to_core();
-                let out = ctrl.core_step(&state, &sp, dt as f32);
+                let out = ctrl.core_step(&state, &sp, &req.measurement(), dt as f32);
                 serde_json::to_string(&Reply {
                     t: req.t,
                     rpm: out.rotors.rpm,

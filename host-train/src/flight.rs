@@ -70,13 +70,13 @@ pub fn gains_with(law: AdaptationLaw) -> Gains {
 
 /// A host controller that is the core's: it also gives the core's full [`Output`].
 pub trait CoreStep: Controller {
-    /// One core step on f32 state and setpoint.
-    fn core_step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output;
+    /// One core step on f32 state, setpoint and sensor measurement.
+    fn core_step(&mut self, state: &State, sp: &Setpoint, meas: &Measurement, dt_s: f32) -> Output;
 }
 
 impl<M: HamiltonianModel> CoreStep for CoreController<M> {
-    fn core_step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output {
-        let out = self.inner.step(state, sp, dt_s);
+    fn core_step(&mut self, state: &State, sp: &Setpoint, meas: &Measurement, dt_s: f32) -> Output {
+        let out = self.inner.step_measured(state, sp, meas, dt_s);
         self.last = Some(out);
         out
     }

@@ -3,7 +3,7 @@
 //! Self-contained (only `hamflight`, `nalgebra`, `serde`, `serde_json`), so that the fuzz target
 //! `fuzz/fuzz_targets/bridge_line.rs` compiles this very file (`#[path]`) without the host crate.
 
-use hamflight::{Setpoint, State};
+use hamflight::{Measurement, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
@@ -47,6 +47,10 @@ pub struct Request {
     pub w: [f64; 3],
     /// The setpoint.
     pub setpoint: SetpointMsg,
+    /// Optional accelerometer: the specific force (m/s², body frame; +9.8 along body z at
+    /// hover). The composite adaptation law uses it; without it, it differences the velocity.
+    #[serde(default)]
+    pub acc: Option<[f64; 3]>,
 }
 
 /// Parses one request line (JSON; unknown fields are errors).
@@ -58,6 +62,15 @@ pub fn parse_request(line: &str) -> Result<Request, serde_json::Error> {
 }
 
 impl Request {
+    /// The sensor measurement for the core (the accelerometer, when sent).
+    pub fn measurement(&self) -> Measurement {
+        Measurement {
+            acc_body_m_s2: self
+                .acc
+                .map(|a| Vector3::new(a[0] as f32, a[1] as f32, a[2] as f32)),
+        }
+    }
+
     /// The core's state and setpoint.
     pub fn to_core(&self) -> (State, Setpoint) {
         let v3 = |a: [f64; 3]| Vector3::new(a[0] as f32, a[1] as f32, a[2] as f32);
