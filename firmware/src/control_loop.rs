@@ -277,7 +277,10 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         let start = cost.now();
         let state = State::from(&input.state);
         let setpoint = Setpoint::from(&input.setpoint);
-        let out = controller.step(&state, &setpoint, dt_s);
+        let meas = hamflight::Measurement {
+            acc_body_m_s2: input.state.acc.map(nalgebra::Vector3::from),
+        };
+        let out = controller.step_measured(&state, &setpoint, &meas, dt_s);
         let mut pwm = out.rotors.rpm.map(rpm_to_pwm);
         if motors.set(pwm).is_err() {
             pwm = [0; 4];

@@ -36,6 +36,10 @@ pub struct WireState {
     pub v: [f32; 3],
     /// Angular velocity ω (rad/s, body frame).
     pub w: [f32; 3],
+    /// The accelerometer's specific force (m/s², body frame), when the sender has one: the
+    /// composite adaptation law uses it, and differences the velocity without it. One byte
+    /// when absent.
+    pub acc: Option<[f32; 3]>,
 }
 
 /// The setpoint on the wire: flat outputs up to jerk (world frame) and yaw.
@@ -262,6 +266,7 @@ impl From<&State> for WireState {
             ],
             v: s.v_body_m_s.into(),
             w: s.w_body_rad_s.into(),
+            acc: None,
         }
     }
 }

@@ -208,6 +208,11 @@ fn random_uplink(rng: &mut SplitMix64) -> Uplink {
                 rot: rng.f32s(),
                 v: rng.f32s(),
                 w: rng.f32s(),
+                acc: if rng.below(2) == 0 {
+                    None
+                } else {
+                    Some(rng.f32s())
+                },
             },
             setpoint: WireSetpoint {
                 p: rng.f32s(),
