@@ -90,6 +90,15 @@ pub fn load_learned(path: &Path) -> Result<LearnedModel> {
         .map_err(|e| anyhow::anyhow!("weight blob `{}`: {e}", path.display()))
 }
 
+/// The adaptation law a controller name selects: `…-composite`, else the paper's gradient law.
+fn law_in_name(name: &str) -> AdaptationLaw {
+    if name.ends_with("-composite") {
+        AdaptationLaw::Composite
+    } else {
+        AdaptationLaw::Gradient
+    }
+}
+
 /// A core controller by name; `weights` (default [`DEFAULT_WEIGHTS`]) for the learned ones.
 pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreStep>> {
     let weights = weights.unwrap_or(Path::new(DEFAULT_WEIGHTS));
@@ -105,11 +114,7 @@ pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreSt
         )),
         "learned" => Box::new(CoreController::new(name, load_learned(weights)?, no_adapt)),
         "adaptive-gradient" | "adaptive-composite" => {
-            let law = if name.ends_with("composite") {
-                AdaptationLaw::Composite
-            } else {
-                AdaptationLaw::Gradient
-            };
+            let law = law_in_name(name);
             Box::new(CoreController::new(
                 name,
                 load_learned(weights)?,
@@ -118,11 +123,7 @@ pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreSt
         }
         "geometric-adaptive" => Box::new(geometric_adaptive()),
         "geometric-adaptive-gradient" | "geometric-adaptive-composite" => {
-            let law = if name.ends_with("composite") {
-                AdaptationLaw::Composite
-            } else {
-                AdaptationLaw::Gradient
-            };
+            let law = law_in_name(name);
             Box::new(CoreController::new(
                 name,
                 NominalModel::default(),
