@@ -256,6 +256,11 @@ pub fn collect(out: &Path, c: &CollectConfig) -> Result<Manifest> {
     );
     let mut ds = Dataset::new(c.sample_hz, params.mass_kg, params.gravity_m_s2, "collect");
     ds.manifest.seed = Some(c.seed);
+    ds.manifest.vehicle = dataset::VehicleDescription {
+        inertia_kg_m2: Some(params.inertia_kg_m2),
+        rotor_efficiency: Some(params.rotor_efficiency),
+        motor_tau_s: None,
+    };
     for j in 0..c.realizations {
         let (dist, flights) = collect_realization(c, j, &params, || pb.inc(1))?;
         ds.realizations.push(Realization {

@@ -12,6 +12,8 @@
 //! ```json
 //! {"format": "hamflight-dataset-v2", "sample_hz": 240.0, "mass_kg": 0.027,
 //!  "gravity_m_s2": 9.8, "source": "collect", "seed": 0,
+//!  "vehicle": {"inertia_kg_m2": [1.4e-5, 1.4e-5, 2.17e-5], "rotor_efficiency": [1, 1, 1, 1],
+//!              "motor_tau_s": null},
 //!  "realizations": [{"file": "realization_00.csv", "source_file": null,
 //!                    "wind_m_s2": [x, y, z], "rotor_efficiency": [d1, d2, d3, d4],
 //!                    "disturbance_free": false, "flights": 9, "samples": 4329}, ...]}
@@ -21,6 +23,11 @@
 //!   `1/sample_hz` s and uses only steps whose timestamps are that far apart (see [`segments`]).
 //! - `mass_kg`, `gravity_m_s2`: the vehicle's mass and gravity the data was taken with.
 //! - `source`: `collect` (our simulator) or `import` (flight logs); `seed`: collection seed or null.
+//! - `vehicle` (optional, every key optional): what is known of the vehicle beyond its mass, for
+//!   the training report's "true" values (omitted there when unknown): `inertia_kg_m2` diag(J)
+//!   (kg·m²); `rotor_efficiency` the vehicle's own rotor thrust factors δ₁..δ₄; `motor_tau_s`
+//!   the first-order motor time constant the stored commands were passed through at import (the
+//!   stored command is then the *realized* one, see [`crate::import`]; null: stored as logged).
 //! - `source_file`: for imports, the log the realization came from.
 //! - `wind_m_s2`, `rotor_efficiency`: the true disturbance (world specific force, m/s²; δ₁..δ₄)
 //!   when known (collection), else null.
@@ -99,8 +106,23 @@ pub struct Manifest {
     pub source: String,
     /// Collection seed, if any.
     pub seed: Option<u64>,
+    /// What is known of the vehicle beyond its mass.
+    #[serde(default)]
+    pub vehicle: VehicleDescription,
     /// One entry per realization file.
     pub realizations: Vec<RealizationMeta>,
+}
+
+/// The manifest's `vehicle`: what is known of the vehicle beyond its mass (each key optional).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct VehicleDescription {
+    /// Principal moments of inertia diag(J) (kg·m²).
+    pub inertia_kg_m2: Option<[f64; 3]>,
+    /// The vehicle's own rotor thrust factors δ₁..δ₄.
+    pub rotor_efficiency: Option<[f64; 4]>,
+    /// First-order motor time constant (s) the stored commands were filtered with at import.
+    pub motor_tau_s: Option<f64>,
 }
 
 /// One realization's entry in the manifest.
@@ -214,6 +236,7 @@ impl Dataset {
                 gravity_m_s2,
                 source: source.into(),
                 seed: None,
+                vehicle: VehicleDescription::default(),
                 realizations: Vec::new(),
             },
             realizations: Vec::new(),

@@ -35,6 +35,22 @@
 //! the last command is held (zero-order hold, as the motors hold it); rows before the first
 //! command are dropped.
 //!
+//! # Motor dynamics (`--motor-tau-s T`)
+//!
+//! The log holds the *commanded* wrench; with motor lag the rotors realize it only after a
+//! delay, and a model trained on the commanded wrench takes up the lag elsewhere (the probe of
+//! issue 10 learned a J 5× too large). With `--motor-tau-s T` the importer turns each logged
+//! command into the realized one the trainer integrates. The log has no motor outputs, so the
+//! wrench is taken apart per rotor through the CF2X mixer inverse (squared rotor speeds ωᵢ², as
+//! [`crate::plant::VehicleParams::wrench_to_rpm_squared`]), each rotor speed follows the
+//! commanded one through the first-order lag ω̇ᵢ = (ωᵢ,cmd − ωᵢ)/T from sample to sample
+//! (exactly, the command held between samples), and the stored wrench is that of the step's
+//! mean ωᵢ² (exact for the lag). The filter starts at each continuous stretch's first command
+//! (the rotors at steady state) and runs over every decoded sample before the airborne rule
+//! picks flights, so take-off's transient is outside the kept data. The manifest's
+//! `vehicle.motor_tau_s` records T. `--inertia-kg-m2` and `--rotor-efficiency` describe the
+//! vehicle further for the training report's "true" values (nothing else uses them).
+//!
 //! # Ground, take-off and landing
 //!
 //! A sample is airborne when `z ≥ --min-height-m` (default 0.10 m above the floor, z = 0) and
@@ -55,7 +71,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use crate::dataset::{self, Dataset, Flight, Realization, RealizationMeta, Sample};
-use crate::plant::PlantState;
+use crate::plant::{PlantState, VehicleParams};
 use crate::usdlog::{self, ParseOptions};
 
 /// Standard gravity used to convert Bitcraze's accelerometer (g) to m/s².
@@ -121,6 +137,16 @@ pub struct ImportArgs {
     /// Gravity (m/s²).
     #[arg(long, default_value_t = 9.8)]
     pub gravity_m_s2: f64,
+    /// Vehicle inertia diag(J) (kg·m²), comma-separated; for the training report only.
+    #[arg(long, value_delimiter = ',', num_args = 3, value_name = "JX,JY,JZ")]
+    pub inertia_kg_m2: Option<Vec<f64>>,
+    /// The vehicle's own rotor thrust factors δ₁..δ₄, when known; for the training report only.
+    #[arg(long, value_delimiter = ',', num_args = 4, value_name = "D1,D2,D3,D4")]
+    pub rotor_efficiency: Option<Vec<f64>>,
+    /// First-order motor time constant (s): store the realized command (the logged one through
+    /// the motor lag, per rotor) instead of the logged one; see the module docs.
+    #[arg(long, value_name = "T")]
+    pub motor_tau_s: Option<f64>,
     /// uSD variables of the commanded thrust (N) and body torques (N·m), comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = LEE_COMMAND_VARS.map(String::from))]
     pub command_vars: Vec<String>,
@@ -385,6 +411,49 @@ pub fn median_dt_s(samples: &[Sample]) -> Option<f64> {
     d.get(d.len() / 2).copied()
 }
 
+/// Replaces each sample's commanded wrench by the realized one under a first-order motor lag of
+/// `tau_s` (module docs, "Motor dynamics"), stretch by stretch ([`dataset::segments`] at
+/// `sample_hz`); `params` gives the mixer (the CF2X's rotor geometry and coefficients).
+pub fn realize_commands(samples: &mut [Sample], sample_hz: f64, tau_s: f64, params: &VehicleParams) {
+    if tau_s.is_nan() || tau_s <= 0.0 {
+        return;
+    }
+    let nominal_dt = 1.0 / sample_hz;
+    for seg in dataset::segments(samples, sample_hz) {
+        let seg = &mut samples[seg];
+        let cmd_of = |s: &Sample| {
+            params
+                .wrench_to_rpm_squared(s.wrench)
+                .map(|q| q.max(0.0).sqrt())
+        };
+        let Some(first) = seg.first() else { continue };
+        let mut rotor = cmd_of(first);
+        for k in 0..seg.len() {
+            let dt = seg
+                .get(k + 1)
+                .map_or(nominal_dt, |n| n.t_s - seg[k].t_s)
+                .max(0.0);
+            let c = cmd_of(&seg[k]);
+            let e1 = (-dt / tau_s).exp();
+            // Mean over the step of ω(t)² with ω(t) = c + (ω₀ − c) e^{−t/T}.
+            let (m1, m2) = if dt > 0.0 {
+                (
+                    tau_s / dt * (1.0 - e1),
+                    tau_s / (2.0 * dt) * (1.0 - e1 * e1),
+                )
+            } else {
+                (1.0, 1.0)
+            };
+            let mean_sq: [f64; 4] = std::array::from_fn(|i| {
+                let d = rotor[i] - c[i];
+                c[i] * c[i] + 2.0 * c[i] * d * m1 + d * d * m2
+            });
+            seg[k].wrench = params.wrench_of_rpm_squared(mean_sq);
+            rotor = std::array::from_fn(|i| c[i] + (rotor[i] - c[i]) * e1);
+        }
+    }
+}
+
 /// The airborne flights of `samples` by the documented rule (module docs), at `sample_hz`.
 pub fn airborne_flights(samples: &[Sample], sample_hz: f64, args: &ImportArgs) -> Vec<Flight> {
     let weight = args.mass_kg * args.gravity_m_s2;
@@ -468,6 +537,23 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
     if !positive(args.mass_kg) || !positive(args.gravity_m_s2) {
         bail!("--mass-kg and --gravity-m-s2 must be positive");
     }
+    if args.motor_tau_s.is_some_and(|t| !(t.is_finite() && t >= 0.0)) {
+        bail!("--motor-tau-s must be a time constant ≥ 0 s");
+    }
+    let inertia: Option<[f64; 3]> = match &args.inertia_kg_m2 {
+        None => None,
+        Some(j) => match <[f64; 3]>::try_from(j.as_slice()) {
+            Ok(j) if j.iter().all(|x| positive(*x)) => Some(j),
+            _ => bail!("--inertia-kg-m2 needs three positive moments (kg·m²), got {j:?}"),
+        },
+    };
+    let rotor_efficiency: Option<[f64; 4]> = match &args.rotor_efficiency {
+        None => None,
+        Some(d) => match <[f64; 4]>::try_from(d.as_slice()) {
+            Ok(d) if d.iter().all(|x| positive(*x) && *x <= 2.0) => Some(d),
+            _ => bail!("--rotor-efficiency needs four factors in (0, 2], got {d:?}"),
+        },
+    };
     if !(args.trim_s.is_finite()
         && args.trim_s >= 0.0
         && args.min_height_m.is_finite()
@@ -487,6 +573,18 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
     };
     let sample_hz = 1.0 / dt;
     let mut ds = Dataset::new(sample_hz, args.mass_kg, args.gravity_m_s2, "import");
+    let tau = args.motor_tau_s.filter(|t| *t > 0.0);
+    ds.manifest.vehicle = dataset::VehicleDescription {
+        inertia_kg_m2: inertia,
+        rotor_efficiency,
+        motor_tau_s: tau,
+    };
+    if let Some(tau) = tau {
+        let mixer = VehicleParams::cf2x();
+        for (_, _, d) in decoded.iter_mut() {
+            realize_commands(&mut d.samples, sample_hz, tau, &mixer);
+        }
+    }
     let mut summaries = Vec::with_capacity(decoded.len());
     for (j, (path, calm, d)) in decoded.iter().enumerate() {
         let Some(dt_j) = median_dt_s(&d.samples) else {

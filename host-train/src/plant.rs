@@ -16,7 +16,8 @@
 //! rotors. Rotor numbering (as on the Crazyflie): 1 front-right (+x, −y), 2 back-right (−x, −y),
 //! 3 back-left (−x, +y), 4 front-left (+x, +y). Rotor `i` at speed `ωᵢ` (rpm) makes thrust
 //! `δᵢ kf ωᵢ²` along body z and reaction torque `δᵢ sᵢ km ωᵢ²` about body z with
-//! `s = (−, +, −, +)`; `δᵢ` is its efficiency (1 nominal).
+//! `s = (−, +, −, +)`; `δᵢ` is its efficiency (1 nominal): the disturbance's
+//! ([`Disturbance::rotor_efficiency`]) times the vehicle's own ([`VehicleParams::rotor_efficiency`]).
 //!
 //! Integration: a Runge–Kutta–Munthe-Kaas RK4 step on SE(3) × ℝ⁶ — classical RK4 on
 //! `(p, v, ω, rotor speeds)` while the attitude moves by the exponential map `R = R₀ exp(θ̂)` with
@@ -55,6 +56,15 @@ pub struct VehicleParams {
     pub drag_coeff: [f64; 3],
     /// Ground-effect coefficient of gym-pybullet-drones (dimensionless).
     pub ground_effect_coeff: f64,
+    /// The vehicle's own rotor efficiencies (worn or chipped props, a weak motor): rotor i makes
+    /// this share of its nominal thrust and reaction torque, at all times, on top of any
+    /// [`Disturbance::rotor_efficiency`] (the two multiply). All 1 for the CF2X.
+    #[serde(default = "unit_efficiency")]
+    pub rotor_efficiency: [f64; 4],
+}
+
+fn unit_efficiency() -> [f64; 4] {
+    [1.0; 4]
 }
 
 impl Default for VehicleParams {
@@ -77,6 +87,7 @@ impl VehicleParams {
             prop_radius_m: 2.31348e-2,
             drag_coeff: [9.1785e-7, 9.1785e-7, 10.311e-7],
             ground_effect_coeff: 11.36859,
+            rotor_efficiency: [1.0; 4],
         }
     }
 
@@ -116,10 +127,15 @@ impl VehicleParams {
     /// after clamping, with all efficiencies 1 and no optional effects.
     pub fn nominal_wrench(&self, rpm: [f64; 4]) -> [f64; 4] {
         let rpm = self.clamp_rpm(rpm);
+        self.wrench_of_rpm_squared(rpm.map(|r| r * r))
+    }
+
+    /// Nominal wrench `u = [f; τx; τy; τz]` of squared rotor speeds (rpm², not clamped): linear
+    /// in them, so it also gives the wrench of a time average of ωᵢ².
+    pub fn wrench_of_rpm_squared(&self, rpm_sq: [f64; 4]) -> [f64; 4] {
         let a = self.arm_xy_m;
         let mut u = [0.0; 4];
-        for i in 0..4 {
-            let s = rpm[i] * rpm[i];
+        for (i, &s) in rpm_sq.iter().enumerate() {
             let t = self.kf_n_per_rpm2 * s;
             u[0] += t;
             u[1] += ROTOR_XY_SIGN[i][1] * a * t;
@@ -580,7 +596,8 @@ impl Plant {
     /// Forces and torques on the body at time `t_s` in state `s` with rotor speeds `rotor_rpm`.
     pub fn forces(&self, t_s: f64, s: &PlantState, rotor_rpm: &[f64; 4]) -> Forces {
         let prm = &self.params;
-        let eff = self.disturbance.efficiency_at(t_s);
+        let dist_eff = self.disturbance.efficiency_at(t_s);
+        let eff: [f64; 4] = core::array::from_fn(|i| dist_eff[i] * prm.rotor_efficiency[i]);
         let a = prm.arm_xy_m;
         let max = prm.max_rpm();
         let mut thrust = [0.0; 4];

@@ -46,6 +46,13 @@
 //! pos_m = 0.0; vel_m_s = 0.0; att_rad = 0.0; rate_rad_s = 0.0
 //! acc_m_s2 = 0.0                 # accelerometer noise σ (m/s²), its own random stream
 //!
+//! [vehicle]                      # optional; default: the CF2X of DESIGN.md
+//! mass_kg = 0.034                # mass (kg); the motors' top speed stays the CF2X's, so the
+//!                                # thrust-to-weight ratio falls as the mass grows
+//! inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.821e-5]  # diag(J) (kg·m²)
+//! rotor_efficiency = [1.0, 1.0, 0.9, 1.0]  # the vehicle's own rotors, in (0, 2], always on;
+//!                                # multiplies `disturbance.rotor_efficiency`
+//!
 //! [start]                        # optional; default: at rest, level, on p*(0) with yaw ψ*(0)
 //! position_m = [0.0, 0.0, 0.5]
 //! velocity_m_s = [0.0, 0.0, 0.0] # world frame
@@ -169,6 +176,38 @@ impl DisturbanceSpec {
     }
 }
 
+/// The `[vehicle]` table: what differs from the CF2X (every key optional).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleSpec {
+    /// Mass (kg).
+    pub mass_kg: Option<f64>,
+    /// Principal moments of inertia diag(J) (kg·m²).
+    pub inertia_kg_m2: Option<[f64; 3]>,
+    /// The vehicle's own rotor efficiencies (always on).
+    pub rotor_efficiency: Option<[f64; 4]>,
+}
+
+impl VehicleSpec {
+    /// The CF2X with this table's changes. A new mass keeps the motors: the top rotor speed
+    /// ([`VehicleParams::max_rpm`]) stays the CF2X's, so the thrust-to-weight ratio scales by
+    /// 0.027 kg / mass.
+    pub fn params(&self) -> VehicleParams {
+        let mut v = VehicleParams::cf2x();
+        if let Some(m) = self.mass_kg {
+            v.thrust_to_weight *= v.mass_kg / m;
+            v.mass_kg = m;
+        }
+        if let Some(j) = self.inertia_kg_m2 {
+            v.inertia_kg_m2 = j;
+        }
+        if let Some(e) = self.rotor_efficiency {
+            v.rotor_efficiency = e;
+        }
+        v
+    }
+}
+
 /// The `[start]` table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -228,6 +267,9 @@ pub struct ScenarioSpec {
     /// Optional effects.
     #[serde(default)]
     pub effects: Effects,
+    /// The vehicle, where it differs from the CF2X.
+    #[serde(default)]
+    pub vehicle: VehicleSpec,
     /// Initial state.
     pub start: Option<StartSpec>,
 }
@@ -241,7 +283,7 @@ pub struct Scenario {
     pub path: Option<PathBuf>,
     /// The parsed keys.
     pub spec: ScenarioSpec,
-    /// Vehicle constants (the CF2X).
+    /// Vehicle constants (the CF2X with the `[vehicle]` table's changes).
     pub vehicle: VehicleParams,
 }
 
@@ -272,8 +314,8 @@ impl Scenario {
                 .clone()
                 .unwrap_or_else(|| default_name.to_string()),
             path: None,
+            vehicle: spec.vehicle.params(),
             spec,
-            vehicle: VehicleParams::cf2x(),
         })
     }
 
@@ -283,8 +325,8 @@ impl Scenario {
         Ok(Self {
             name: name.to_string(),
             path: None,
+            vehicle: spec.vehicle.params(),
             spec,
-            vehicle: VehicleParams::cf2x(),
         })
     }
 
@@ -585,6 +627,22 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
         .all(|x| x.is_finite() && *x >= 0.0)
     {
         bail!("key `effects.noise`: expected standard deviations ≥ 0");
+    }
+    let v = &s.vehicle;
+    if v.mass_kg.is_some_and(|m| !(m.is_finite() && m > 0.0)) {
+        bail!("key `vehicle.mass_kg`: expected a positive mass (kg)");
+    }
+    if v
+        .inertia_kg_m2
+        .is_some_and(|j| !j.iter().all(|x| x.is_finite() && *x > 0.0))
+    {
+        bail!("key `vehicle.inertia_kg_m2`: expected three positive moments (kg·m²)");
+    }
+    if v
+        .rotor_efficiency
+        .is_some_and(|e| !e.iter().all(|x| x.is_finite() && *x > 0.0 && *x <= 2.0))
+    {
+        bail!("key `vehicle.rotor_efficiency`: expected four numbers in (0, 2]");
     }
     if let Some(st) = &s.start {
         if !finite_all(&st.position_m)

@@ -50,6 +50,10 @@ pub struct Windows {
     pub window_len: usize,
     /// The realizations' true disturbances, in index order.
     pub realizations: Vec<RealizationInfo>,
+    /// The manifest's vehicle: mass (kg) and what else it describes (for the report).
+    pub mass_kg: f64,
+    /// The manifest's inertia, rotor efficiencies and motor lag, when given.
+    pub vehicle: dataset::VehicleDescription,
 }
 
 fn f32_state(s: &crate::plant::PlantState) -> State {
@@ -107,6 +111,8 @@ pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
         sample_hz: ds.manifest.sample_hz as f32,
         window_len: spec.len,
         realizations,
+        mass_kg: ds.manifest.mass_kg,
+        vehicle: ds.manifest.vehicle.clone(),
     })
 }
 
