@@ -60,7 +60,7 @@ pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     ),
 ];
 
-/// The default gains with the adaptation law `law`.
+/// The stock vehicle's gains ([`Gains::default`]) with the adaptation law `law`.
 pub fn gains_with(law: AdaptationLaw) -> Gains {
     Gains {
         law,
