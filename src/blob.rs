@@ -8,19 +8,25 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 18 | network shapes: J⁻¹, g, W, each `[inputs, hidden, outputs]` as u16 |
 //! | 24 | 4 | body length in bytes |
-//! | 28 | n | body: [`ModelWeights`] in postcard (every parameter an f32, layer by layer) |
+//! | 28 | n | body: [`ModelWeights`] in postcard: the vehicle's mass (kg), then every network parameter, each an f32 |
 //! | 28 + n | 4 | CRC-32 (IEEE 802.3) of the body |
+//!
+//! Version 1 (before the mass was data) has no mass in its body: it is read as a model of the
+//! stock CF2X ([`MASS_KG`], the only mass version 1 was ever trained with), so old blobs keep
+//! flying unchanged. [`encode`] always writes the current version.
 //!
 //! [`decode`] (by value) and [`decode_into`] (in place, for small stacks) check each field in that
 //! order and return the first failure as a [`BlobError`]; they never panic and never leave a
 //! partly loaded model.
 
-use crate::model::ModelWeights;
+use crate::model::{ModelWeights, MASS_KG, MAX_MASS_KG, MIN_MASS_KG};
 
 /// The blob's first four bytes.
 pub const MAGIC: [u8; 4] = *b"HMFW";
 /// The format version this build reads and writes.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
+/// The oldest format version this build reads (migrated on decode; see the module docs).
+pub const OLDEST_VERSION: u16 = 1;
 /// Size of the fixed header before the body.
 pub const HEADER_LEN: usize = 28;
 /// Size of the trailing checksum.
@@ -46,6 +52,8 @@ pub enum BlobError {
     Malformed,
     /// A parameter is NaN or infinite.
     NonFinite,
+    /// The vehicle mass is not in [[`MIN_MASS_KG`], [`MAX_MASS_KG`]] kg.
+    BadMass,
 }
 
 impl core::fmt::Display for BlobError {
@@ -55,7 +63,8 @@ impl core::fmt::Display for BlobError {
             Self::BadMagic => f.write_str("not a hamflight weight blob (bad magic)"),
             Self::UnsupportedVersion(v) => write!(
                 f,
-                "weight blob format version {v} is not supported (this build reads {FORMAT_VERSION})"
+                "weight blob format version {v} is not supported (this build reads \
+                 {OLDEST_VERSION} to {FORMAT_VERSION})"
             ),
             Self::ShapeMismatch => {
                 f.write_str("weight blob network shapes differ from this build's networks")
@@ -64,13 +73,17 @@ impl core::fmt::Display for BlobError {
             Self::TrailingBytes => f.write_str("weight blob has bytes after its checksum"),
             Self::Malformed => f.write_str("weight blob body is malformed"),
             Self::NonFinite => f.write_str("weight blob holds a NaN or infinite parameter"),
+            Self::BadMass => write!(
+                f,
+                "weight blob vehicle mass is outside {MIN_MASS_KG}..={MAX_MASS_KG} kg"
+            ),
         }
     }
 }
 
 impl core::error::Error for BlobError {}
 
-/// The header bytes this build writes and expects (magic, version, shapes), without the length.
+/// The header bytes this build writes (magic, version, shapes), without the length.
 fn expected_prefix() -> [u8; 24] {
     let mut out = [0u8; 24];
     let mut fields = MAGIC.into_iter().chain(FORMAT_VERSION.to_le_bytes()).chain(
@@ -108,16 +121,16 @@ pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
 /// the stack, so a firmware can boot on a few hundred bytes of it (decoding into a `static`).
 /// Every check runs before the first parameter is written, so on error `out` is unchanged.
 ///
-/// The body is postcard's encoding of [`ModelWeights`], which for these all-f32 tuples is each
-/// parameter as 4 little-endian bytes in [`ModelWeights::params_mut`] order; it is read as such
+/// The body is postcard's encoding of [`ModelWeights`], which for these all-f32 tuples is the mass
+/// then each parameter as 4 little-endian bytes in [`ModelWeights::params_mut`] order; it is read as such
 /// (`tests/blob.rs` checks that postcard agrees on random and shipped blobs).
 ///
 /// # Errors
 /// The first failed check, in file order: [`BlobError::Truncated`] (shorter than the header),
 /// [`BlobError::BadMagic`], [`BlobError::UnsupportedVersion`], [`BlobError::ShapeMismatch`],
 /// [`BlobError::Truncated`] / [`BlobError::TrailingBytes`] (length disagrees with the header),
-/// [`BlobError::Checksum`], [`BlobError::Malformed`] (the body is not
-/// [`ModelWeights::PARAMS`] f32 values), [`BlobError::NonFinite`].
+/// [`BlobError::Checksum`], [`BlobError::Malformed`] (the body is not the mass and
+/// [`ModelWeights::PARAMS`] f32 values), [`BlobError::NonFinite`], [`BlobError::BadMass`].
 pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError> {
     let prefix = expected_prefix();
     let magic = bytes.get(..4).ok_or(BlobError::Truncated)?;
@@ -128,7 +141,7 @@ pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError
         .get(4..)
         .and_then(le_u16)
         .ok_or(BlobError::Truncated)?;
-    if version != FORMAT_VERSION {
+    if !(OLDEST_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(BlobError::UnsupportedVersion(version));
     }
     let shapes = bytes.get(6..24).ok_or(BlobError::Truncated)?;
@@ -159,13 +172,23 @@ pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError
     if crc32(body) != stored_crc {
         return Err(BlobError::Checksum);
     }
-    let (params, rest) = body.as_chunks::<4>();
+    let (values, rest) = body.as_chunks::<4>();
+    // Version 2 puts the mass before the parameters; version 1 has none (the stock vehicle).
+    let (mass_kg, params) = match (version, values) {
+        (1, params) => (MASS_KG, params),
+        (_, [mass, params @ ..]) => (f32::from_le_bytes(*mass), params),
+        (_, []) => return Err(BlobError::Malformed),
+    };
     if params.len() != ModelWeights::PARAMS || !rest.is_empty() {
         return Err(BlobError::Malformed);
     }
-    if !params.iter().all(|b| f32::from_le_bytes(*b).is_finite()) {
+    if !mass_kg.is_finite() || !params.iter().all(|b| f32::from_le_bytes(*b).is_finite()) {
         return Err(BlobError::NonFinite);
     }
+    if !(MIN_MASS_KG..=MAX_MASS_KG).contains(&mass_kg) {
+        return Err(BlobError::BadMass);
+    }
+    out.mass_kg = mass_kg;
     for (slot, b) in out.params_mut().zip(params) {
         *slot = f32::from_le_bytes(*b);
     }

@@ -70,10 +70,21 @@ pub struct Gains {
 }
 
 impl Default for Gains {
+    /// The tuned gains for the stock vehicle ([`MASS_KG`]).
     fn default() -> Self {
+        Self::for_mass_kg(MASS_KG)
+    }
+}
+
+impl Gains {
+    /// The tuned gains for a vehicle of mass `mass_kg` (kg): k_p = 16 m and k_v = 8 m, so the
+    /// translational loop keeps its natural frequency (4 rad/s) and damping (ζ = 1) whatever the
+    /// vehicle weighs. Attitude gains and adaptation rates are per unit inertia and feature and
+    /// stay as tuned for the CF2X.
+    pub fn for_mass_kg(mass_kg: f32) -> Self {
         Self {
-            k_p: 16.0 * MASS_KG,
-            k_v: 8.0 * MASS_KG,
+            k_p: 16.0 * mass_kg,
+            k_v: 8.0 * mass_kg,
             k_r: 0.015,
             k_w: 0.002,
             max_tilt_rad: 0.6,
@@ -92,9 +103,7 @@ impl Default for Gains {
             composite: CompositeGains::default(),
         }
     }
-}
 
-impl Gains {
     /// The paper's literal values (Sec. 4): k_p = 0.135, k_v = 0.0675, k_R = 1.0, k_ω = 0.08,
     /// c_p = c_v = 0.04, c_R = c_ω = 0.5, and no robust clipping. See the type's docs for why
     /// they are not the default.

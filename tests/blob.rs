@@ -10,7 +10,7 @@ mod common;
 
 use common::SplitMix64;
 use hamflight::blob::{decode, decode_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC};
-use hamflight::model::{GainNet, InertiaNet, ModelWeights};
+use hamflight::model::{GainNet, InertiaNet, ModelWeights, MASS_KG, MAX_MASS_KG, MIN_MASS_KG};
 use hamflight::nn::{Dense, Mlp};
 use proptest::prelude::*;
 
@@ -44,11 +44,18 @@ fn params(w: &ModelWeights) -> Vec<f32> {
     out
 }
 
+/// The body's values in blob order (format version 2): the mass, then every parameter.
+fn body_values(w: &ModelWeights) -> Vec<f32> {
+    [w.mass_kg].into_iter().chain(params(w)).collect()
+}
+
 /// Weights with every parameter a random finite f32 bit pattern (including ±0, subnormals and
-/// extreme magnitudes), so a round trip that is merely "close" fails.
+/// extreme magnitudes), so a round trip that is merely "close" fails, and a random valid mass.
 fn random_weights(seed: u64) -> ModelWeights {
     let mut rng = SplitMix64(seed);
     let mut w = ModelWeights::default();
+    let unit = (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+    w.mass_kg = MIN_MASS_KG + unit * (MAX_MASS_KG - MIN_MASS_KG);
     for_each_param(&mut w, |v| {
         let mut x = f32::from_bits(rng.next_u64() as u32);
         while !x.is_finite() {
@@ -75,11 +82,16 @@ fn crc32_reference(data: &[u8]) -> u32 {
     !crc
 }
 
-/// A blob from a raw body, following the documented layout.
+/// A current-version blob from a raw body, following the documented layout.
 fn blob_from_body(body: &[u8]) -> Vec<u8> {
+    blob_from_body_version(2, body)
+}
+
+/// A blob of format `version` from a raw body, following the documented layout.
+fn blob_from_body_version(version: u16, body: &[u8]) -> Vec<u8> {
     let mut out = Vec::new();
     out.extend_from_slice(b"HMFW");
-    out.extend_from_slice(&1u16.to_le_bytes());
+    out.extend_from_slice(&version.to_le_bytes());
     for shape in ModelWeights::DIMS {
         for d in shape {
             out.extend_from_slice(&d.to_le_bytes());
@@ -93,12 +105,15 @@ fn blob_from_body(body: &[u8]) -> Vec<u8> {
 
 /// The documented encoding of `w`.
 fn encode_reference(w: &ModelWeights) -> Vec<u8> {
-    let body: Vec<u8> = params(w).iter().flat_map(|v| v.to_le_bytes()).collect();
+    let body: Vec<u8> = body_values(w)
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
     blob_from_body(&body)
 }
 
 fn assert_bitwise_eq(a: &ModelWeights, b: &ModelWeights) {
-    let (pa, pb) = (params(a), params(b));
+    let (pa, pb) = (body_values(a), body_values(b));
     assert_eq!(pa.len(), pb.len());
     for (n, (x, y)) in pa.iter().zip(pb.iter()).enumerate() {
         assert_eq!(x.to_bits(), y.to_bits(), "parameter {n}: {x:e} vs {y:e}");
@@ -113,7 +128,11 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
         4..6 => {
             let mut v = FORMAT_VERSION.to_le_bytes();
             v[pos - 4] ^= mask;
-            BlobError::UnsupportedVersion(u16::from_le_bytes(v))
+            match u16::from_le_bytes(v) {
+                // Version 1 would read the mass as a parameter: one value too many.
+                1 => BlobError::Malformed,
+                v => BlobError::UnsupportedVersion(v),
+            }
         }
         6..24 => BlobError::ShapeMismatch,
         24..28 => {
@@ -132,14 +151,15 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
 #[test]
 fn layout_constants_match_the_documentation() {
     assert_eq!(MAGIC, *b"HMFW");
-    assert_eq!(FORMAT_VERSION, 1);
+    assert_eq!(FORMAT_VERSION, 2);
     assert_eq!(HEADER_LEN, 28);
     assert_eq!(CRC_LEN, 4);
     let blob = encode_reference(&ModelWeights::default());
     assert_eq!(
         blob.len(),
-        HEADER_LEN + 4 * params(&ModelWeights::default()).len() + CRC_LEN
+        HEADER_LEN + 4 + 4 * params(&ModelWeights::default()).len() + CRC_LEN
     );
+    assert_eq!(ModelWeights::default().mass_kg, MASS_KG);
     assert_eq!(crc32_reference(b"123456789"), 0xCBF4_3926);
     assert_eq!(
         hamflight::blob::crc32(b"123456789"),
@@ -249,6 +269,58 @@ fn non_finite_parameter_with_valid_checksum_is_rejected() {
 }
 
 #[test]
+fn mass_outside_the_documented_range_is_rejected() {
+    for bad in [0.0, -0.027, MIN_MASS_KG * 0.99, MAX_MASS_KG * 1.01, 1e30] {
+        let w = ModelWeights {
+            mass_kg: bad,
+            ..random_weights(23)
+        };
+        assert_eq!(
+            decode(&encode_reference(&w)).err(),
+            Some(BlobError::BadMass),
+            "{bad} kg"
+        );
+    }
+    for bad in [f32::NAN, f32::INFINITY] {
+        let w = ModelWeights {
+            mass_kg: bad,
+            ..random_weights(23)
+        };
+        assert_eq!(
+            decode(&encode_reference(&w)).err(),
+            Some(BlobError::NonFinite)
+        );
+    }
+    for ok in [MIN_MASS_KG, 0.034, MAX_MASS_KG] {
+        let w = ModelWeights {
+            mass_kg: ok,
+            ..random_weights(23)
+        };
+        assert_eq!(decode(&encode_reference(&w)).map(|d| d.mass_kg), Ok(ok));
+    }
+}
+
+/// A version-1 blob (no mass in its body) still loads, as the stock vehicle it was trained for.
+#[test]
+fn version_1_blob_is_migrated_to_the_stock_mass() {
+    let w = ModelWeights {
+        mass_kg: 0.034,
+        ..random_weights(29)
+    };
+    let body: Vec<u8> = params(&w).iter().flat_map(|v| v.to_le_bytes()).collect();
+    let v1 = blob_from_body_version(1, &body);
+    let got = decode(&v1).expect("version 1 decodes");
+    assert_eq!(got.mass_kg, MASS_KG);
+    assert_eq!(params(&got), params(&w));
+    // A version-1 header over a version-2 body has one value too many.
+    let v2_body = &encode_reference(&w)[HEADER_LEN..][..body.len() + 4];
+    assert_eq!(
+        decode(&blob_from_body_version(1, v2_body)).err(),
+        Some(BlobError::Malformed)
+    );
+}
+
+#[test]
 fn body_that_is_not_the_networks_is_malformed() {
     let blob = encode_reference(&random_weights(19));
     let body = &blob[HEADER_LEN..blob.len() - CRC_LEN];
@@ -278,8 +350,12 @@ fn header_checks_come_in_file_order() {
     assert_eq!(decode(b"XXXX").err(), Some(BlobError::BadMagic));
     assert_eq!(decode(b"HMFW").err(), Some(BlobError::Truncated));
     assert_eq!(
-        decode(b"HMFW\x02\x00").err(),
-        Some(BlobError::UnsupportedVersion(2))
+        decode(b"HMFW\x03\x00").err(),
+        Some(BlobError::UnsupportedVersion(3))
+    );
+    assert_eq!(
+        decode(b"HMFW\x00\x00").err(),
+        Some(BlobError::UnsupportedVersion(0))
     );
     let blob = encode_reference(&ModelWeights::default());
     // Wrong version and wrong shapes: the version is reported.
@@ -334,7 +410,7 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
         return Err(BlobError::Truncated);
     }
     let version = u16::from_le_bytes([b[4], b[5]]);
-    if version != 1 {
+    if version != 1 && version != 2 {
         return Err(BlobError::UnsupportedVersion(version));
     }
     if b.len() < 24 {
@@ -369,16 +445,24 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
     if crc32_reference(body) != crc {
         return Err(BlobError::Checksum);
     }
-    let n = params(&ModelWeights::default()).len();
+    // Version 2: the mass, then the parameters; version 1: the parameters (the stock mass).
+    let n = params(&ModelWeights::default()).len() + usize::from(version == 2);
     if body.len() != 4 * n {
         return Err(BlobError::Malformed);
     }
-    let values: Vec<f32> = body
+    let stored = body
         .chunks(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let values: Vec<f32> = if version == 1 {
+        std::iter::once(MASS_KG).chain(stored).collect()
+    } else {
+        stored.collect()
+    };
     if values.iter().any(|v| !v.is_finite()) {
         return Err(BlobError::NonFinite);
+    }
+    if !(MIN_MASS_KG..=MAX_MASS_KG).contains(&values[0]) {
+        return Err(BlobError::BadMass);
     }
     Ok(values)
 }
@@ -487,7 +571,7 @@ fn randomized_mutants_get_the_documented_result() {
         match &want {
             Ok(values) => {
                 assert_eq!(got, Ok(()), "case {case}");
-                let bits: Vec<u32> = params(&out).iter().map(|v| v.to_bits()).collect();
+                let bits: Vec<u32> = body_values(&out).iter().map(|v| v.to_bits()).collect();
                 let want_bits: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
                 assert_eq!(bits, want_bits, "case {case}");
             }
@@ -497,7 +581,10 @@ fn randomized_mutants_get_the_documented_result() {
             }
         }
         assert_eq!(
-            decode(&bytes).map(|w| params(&w).iter().map(|v| v.to_bits()).collect::<Vec<_>>()),
+            decode(&bytes).map(|w| body_values(&w)
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()),
             want.map(|v| v.iter().map(|x| x.to_bits()).collect()),
             "case {case}"
         );

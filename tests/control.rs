@@ -2,7 +2,7 @@
 //! motors off and a fault flag for non-finite input, and the mixer's limits.
 
 use hamflight::mixer::Airframe;
-use hamflight::model::{LearnedModel, ModelWeights, NominalModel};
+use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, NominalModel};
 use hamflight::{FlightController, Gains, RotorCommand, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
 use proptest::prelude::*;
@@ -206,4 +206,44 @@ fn rotation_tolerance_is_documented_value() {
     assert!(hamflight::is_rotation(&r));
     r.m11 = 1.0 + 0.6e-3; // ≈ 1.2e-3: outside
     assert!(!hamflight::is_rotation(&r));
+}
+
+/// The vehicle's mass is data (issue 10 item 3): a blob's mass sets the hover thrust and the
+/// translational gains, for the learned and the nominal model alike.
+#[test]
+fn the_models_mass_sets_hover_thrust_and_gains() {
+    let g_m_s2 = hamflight::model::GRAVITY_M_S2;
+    for mass_kg in [0.027f32, 0.034, 0.05] {
+        let learned = LearnedModel::new(ModelWeights {
+            mass_kg,
+            ..ModelWeights::prior()
+        });
+        let nominal = NominalModel::new(
+            mass_kg,
+            Matrix3::from_diagonal(&Vector3::new(1.4e-5, 1.4e-5, 2.17e-5)),
+        );
+        assert_eq!(learned.mass_kg(), mass_kg);
+        assert_eq!(nominal.mass_kg(), mass_kg);
+        let gains = Gains::for_mass_kg(mass_kg);
+        assert!(
+            (gains.k_p - 16.0 * mass_kg).abs() < 1e-7 && (gains.k_v - 8.0 * mass_kg).abs() < 1e-7
+        );
+        let hover = State::default();
+        for thrust_n in [
+            FlightController::new(learned, gains).step(&hover, &Setpoint::default(), 0.002),
+            FlightController::new(nominal, gains).step(&hover, &Setpoint::default(), 0.002),
+        ]
+        .map(|o| o.wrench.thrust_n)
+        {
+            let weight_n = mass_kg * g_m_s2;
+            assert!(
+                (thrust_n - weight_n).abs() < 0.02 * weight_n,
+                "{mass_kg} kg: thrust {thrust_n} N against weight {weight_n} N"
+            );
+        }
+    }
+    assert_eq!(
+        Gains::default(),
+        Gains::for_mass_kg(hamflight::model::MASS_KG)
+    );
 }

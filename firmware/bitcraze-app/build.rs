@@ -104,6 +104,11 @@ fn model_source(w: &ModelWeights, name: &str, crc: u32) -> String {
     let _ = writeln!(s, "/// The learned model, in flash.");
     s.push_str("pub static MODEL: hamflight::model::LearnedModel =\n");
     s.push_str("    hamflight::model::LearnedModel::new(hamflight::model::ModelWeights {\n");
+    let _ = writeln!(
+        s,
+        "        mass_kg: f32::from_bits({:#010x}),",
+        w.mass_kg.to_bits()
+    );
     for (field, text) in [
         ("inertia", mlp(&w.inertia)),
         ("gain", mlp(&w.gain)),

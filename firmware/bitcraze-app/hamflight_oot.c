@@ -348,8 +348,8 @@ void controllerOutOfTreeInit(void) {
   }
   zeroWrench();
   updateLogs();
-  DEBUG_PRINT("model %s crc %08X, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
-              (int)HAMFLIGHT_RATE_HZ);
+  DEBUG_PRINT("model %s crc %08X, %d g, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
+              (int)(hf_mass_kg() * 1000.0f + 0.5f), (int)HAMFLIGHT_RATE_HZ);
 }
 
 /* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */

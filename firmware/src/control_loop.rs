@@ -182,18 +182,19 @@ pub struct ControlLoop<M> {
     total_cost: u64,
 }
 
-/// The core's default gains; with the `composite` feature, the composite adaptation law.
-pub fn default_gains() -> Gains {
+/// The core's gains for a vehicle of `mass_kg` (the blob's, [`Gains::for_mass_kg`]); with the
+/// `composite` feature, the composite adaptation law.
+pub fn default_gains(mass_kg: f32) -> Gains {
     #[cfg(feature = "composite")]
     {
         Gains {
             law: hamflight::AdaptationLaw::Composite,
-            ..Gains::default()
+            ..Gains::for_mass_kg(mass_kg)
         }
     }
     #[cfg(not(feature = "composite"))]
     {
-        Gains::default()
+        Gains::for_mass_kg(mass_kg)
     }
 }
 
@@ -207,7 +208,10 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             LinkStatus::BadBlob
         };
         Self {
-            controller: model.map(|m| FlightController::new(m, default_gains())),
+            controller: model.map(|m| {
+                let gains = default_gains(m.mass_kg());
+                FlightController::new(m, gains)
+            }),
             latest: None,
             ticks_since_used: None,
             last_used_seq: 0,

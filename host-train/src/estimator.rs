@@ -214,7 +214,10 @@ fn track_both<M: HamiltonianModel + Clone>(
     let mut laws = Vec::new();
     let mut bandwidth = Vec::new();
     for law in [AdaptationLaw::Gradient, AdaptationLaw::Composite] {
-        let gains = crate::flight::gains_with(law);
+        let gains = hamflight::Gains {
+            law,
+            ..hamflight::Gains::for_mass_kg(model.mass_kg())
+        };
         let mut ctrl = CoreController::new(&args.controller, model.clone(), gains);
         let trace = track_disturbance(sc, &mut ctrl);
         let errs: Vec<f64> = trace

@@ -60,7 +60,7 @@ pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     ),
 ];
 
-/// The default gains with the adaptation law `law`.
+/// The stock vehicle's gains ([`Gains::default`]) with the adaptation law `law`.
 pub fn gains_with(law: AdaptationLaw) -> Gains {
     Gains {
         law,
@@ -99,28 +99,25 @@ fn law_in_name(name: &str) -> AdaptationLaw {
     }
 }
 
-/// A core controller by name; `weights` (default [`DEFAULT_WEIGHTS`]) for the learned ones.
+/// A core controller by name; `weights` (default [`DEFAULT_WEIGHTS`]) for the learned ones. A
+/// learned model flies with the gains for the mass its blob carries ([`Gains::for_mass_kg`]).
 pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreStep>> {
     let weights = weights.unwrap_or(Path::new(DEFAULT_WEIGHTS));
-    let no_adapt = Gains {
-        adapt: false,
-        ..Gains::default()
+    let learned = |gains: &dyn Fn(f32) -> Gains| -> Result<Box<dyn CoreStep>> {
+        let model = load_learned(weights)?;
+        let g = gains(model.mass_kg());
+        Ok(Box::new(CoreController::new(name, model, g)))
     };
     Ok(match name {
-        "adaptive" => Box::new(CoreController::new(
-            name,
-            load_learned(weights)?,
-            Gains::default(),
-        )),
-        "learned" => Box::new(CoreController::new(name, load_learned(weights)?, no_adapt)),
-        "adaptive-gradient" | "adaptive-composite" => {
-            let law = law_in_name(name);
-            Box::new(CoreController::new(
-                name,
-                load_learned(weights)?,
-                gains_with(law),
-            ))
-        }
+        "adaptive" => learned(&Gains::for_mass_kg)?,
+        "learned" => learned(&|m| Gains {
+            adapt: false,
+            ..Gains::for_mass_kg(m)
+        })?,
+        "adaptive-gradient" | "adaptive-composite" => learned(&|m| Gains {
+            law: law_in_name(name),
+            ..Gains::for_mass_kg(m)
+        })?,
         "geometric-adaptive" => Box::new(geometric_adaptive()),
         "geometric-adaptive-gradient" | "geometric-adaptive-composite" => {
             let law = law_in_name(name);

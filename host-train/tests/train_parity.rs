@@ -54,10 +54,19 @@ fn tensor2(v: Vec<f32>, shape: [usize; 2], d: &Device) -> Tensor<2> {
 #[test]
 fn core_and_host_models_agree() {
     let device = Device::flex();
-    let w = weights();
+    // A vehicle heavier than the stock one: the mass must reach both sides the same way.
+    let w = ModelWeights {
+        mass_kg: 0.034,
+        ..weights()
+    };
     let core = LearnedModel::new(w);
     let host = TModel::from_core(&w, &device);
-    let c = Consts::new(&device);
+    let c = Consts::new(&device, w.mass_kg);
+    assert_eq!(
+        host.to_core(&c),
+        w,
+        "host ↔ core weights round trip, mass included"
+    );
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let n = 16;
     let states: Vec<State> = (0..n)
@@ -103,7 +112,7 @@ fn core_and_host_models_agree() {
 
     // J⁻¹, g, W.
     let jinv_h = to_vec(&host.inertia_inv(&c, &rot).jinv);
-    let w_h = to_vec(&host.features(&rot));
+    let w_h = to_vec(&host.features(&c, &rot));
     let mut jinv_c = Vec::new();
     let mut w_c = Vec::new();
     for s in &states {

@@ -29,7 +29,8 @@ use nalgebra::{Matrix3, SMatrix, Vector3, Vector4};
 pub const INERTIA_INV_SCALE_PER_KG_M2: f32 = 1.0e5;
 /// ε of the J⁻¹ head (dimensionless): keeps J⁻¹ ≥ s_J ε I, i.e. J ≤ 1/(s_J ε) = 1e-3 kg·m².
 pub const INERTIA_INV_EPS: f32 = 1.0e-2;
-/// Force scale (N) of the normalized wrench: the hover thrust m g.
+/// Force scale (N) of the normalized wrench: the stock vehicle's hover thrust m g. A fixed
+/// normalization of the networks' inputs and outputs, the same for every vehicle mass.
 pub const FORCE_SCALE_N: f32 = MASS_KG * GRAVITY_M_S2;
 /// Torque scale (N·m) of the normalized wrench and of the torque rows of W.
 pub const TORQUE_SCALE_NM: f32 = 1.0e-3;
@@ -84,7 +85,7 @@ impl LearnedModel {
     /// W(q, 𝔭) ∈ ℝ⁶ˣᵖ at `state` (N, N·m per unit of a).
     pub fn features(&self, state: &State) -> SMatrix<f32, 6, FEATURES> {
         let out = self.weights.disturbance.forward(&disturbance_input(state));
-        features_from_output(&state.rot, &out)
+        features_from_output(&state.rot, &out, self.weights.mass_kg)
     }
 
     /// The J⁻¹ head with the two input Jacobians the dynamics need (paper eq. 1 and 2):
@@ -130,9 +131,13 @@ impl LearnedModel {
 }
 
 impl HamiltonianModel for LearnedModel {
+    fn mass_kg(&self) -> f32 {
+        self.weights.mass_kg
+    }
+
     fn terms(&self, state: &State) -> ModelTerms {
         ModelTerms {
-            mass_kg: MASS_KG,
+            mass_kg: self.weights.mass_kg,
             gravity_m_s2: GRAVITY_M_S2,
             inertia_inv: self.inertia_inv(&state.rot),
             gain: self.gain(&state.rot),
@@ -151,7 +156,7 @@ impl HamiltonianModel for LearnedModel {
         let p_w = j * state.w_body_rad_s;
         let (jinv, djinv_dt, dh_dr) = self.inertia_inv_jacobians(&state.rot, &rot_dot, &p_w);
         let terms = ModelTerms {
-            mass_kg: MASS_KG,
+            mass_kg: self.weights.mass_kg,
             gravity_m_s2: GRAVITY_M_S2,
             inertia_inv: jinv,
             gain: self.gain(&state.rot),
@@ -203,16 +208,18 @@ pub fn gain_from_output(out: &[f32; GAIN_OUT]) -> SMatrix<f32, 6, 4> {
     g
 }
 
-/// W from the feature head's output (row-major 6×p): column k = [m Rᵀ n_k; TORQUE_SCALE_NM t_k].
+/// W from the feature head's output (row-major 6×p): column k = [m Rᵀ n_k; TORQUE_SCALE_NM t_k],
+/// with m the vehicle's mass (kg).
 pub fn features_from_output(
     rot: &Matrix3<f32>,
     out: &[f32; super::DIST_OUT],
+    mass_kg: f32,
 ) -> SMatrix<f32, 6, FEATURES> {
     let o = SMatrix::<f32, 6, FEATURES>::from_row_slice(out);
     let mut w = SMatrix::<f32, 6, FEATURES>::zeros();
     let force_world = o.fixed_view::<3, FEATURES>(0, 0);
     w.fixed_view_mut::<3, FEATURES>(0, 0)
-        .copy_from(&(rot.transpose() * force_world * MASS_KG));
+        .copy_from(&(rot.transpose() * force_world * mass_kg));
     w.fixed_view_mut::<3, FEATURES>(3, 0)
         .copy_from(&(o.fixed_view::<3, FEATURES>(3, 0) * TORQUE_SCALE_NM));
     w

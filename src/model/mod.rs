@@ -15,8 +15,14 @@ pub use learned::LearnedModel;
 pub use nominal::{true_input_gain, NominalModel, NOMINAL_TORQUE_FEATURE_NM};
 pub use state::State;
 
-/// The vehicle's mass (kg), known (paper Sec. 4).
+/// The stock CF2X's mass (kg): the default vehicle, and the mass of a version-1 weight blob.
+/// A trained model carries its own vehicle's mass ([`ModelWeights::mass_kg`]); the mass is
+/// known, not learned (paper Sec. 4).
 pub const MASS_KG: f32 = 0.027;
+/// The lightest vehicle mass (kg) a weight blob may carry.
+pub const MIN_MASS_KG: f32 = 0.005;
+/// The heaviest vehicle mass (kg) a weight blob may carry.
+pub const MAX_MASS_KG: f32 = 5.0;
 /// Gravitational acceleration (m/s²), as in the SITL plant and gym-pybullet-drones.
 pub const GRAVITY_M_S2: f32 = 9.8;
 
@@ -41,6 +47,11 @@ pub trait HamiltonianModel {
     /// M⁻¹, g and W at `state`.
     fn terms(&self, state: &State) -> ModelTerms;
 
+    /// The vehicle's mass m (kg): what the gains scale with ([`crate::Gains::for_mass_kg`]).
+    fn mass_kg(&self) -> f32 {
+        self.terms(&State::default()).mass_kg
+    }
+
     /// The state derivative of paper eq. 1 (Hamilton's equations on SE(3)) and eq. 2 (ζ̇) under
     /// the control `u` = [f (N); τ (N·m)] and the disturbance d = W(q, 𝔭) `a`.
     ///
@@ -56,6 +67,10 @@ pub trait HamiltonianModel {
 impl<M: HamiltonianModel + ?Sized> HamiltonianModel for &M {
     fn terms(&self, state: &State) -> ModelTerms {
         (**self).terms(state)
+    }
+
+    fn mass_kg(&self) -> f32 {
+        (**self).mass_kg()
     }
 
     fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {
@@ -91,15 +106,26 @@ pub type GainNet = Mlp<GAIN_IN, HIDDEN, GAIN_OUT>;
 /// The W(q, 𝔭) network.
 pub type DisturbanceNet = Mlp<DIST_IN, HIDDEN, DIST_OUT>;
 
-/// All learned parameters θ (J⁻¹, g) and φ (W): what the weight blob carries.
-#[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
+/// What the weight blob carries: the vehicle's known mass and all learned parameters θ (J⁻¹, g)
+/// and φ (W).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelWeights {
+    /// The vehicle's mass m (kg), known and given at training (paper Sec. 4: M = diag(m I, J)).
+    /// One firmware image flies any vehicle: the controller's gains and the W force columns scale
+    /// with it.
+    pub mass_kg: f32,
     /// θ: the inverse-inertia head.
     pub inertia: InertiaNet,
     /// θ: the input gain.
     pub gain: GainNet,
     /// φ: the disturbance features.
     pub disturbance: DisturbanceNet,
+}
+
+impl Default for ModelWeights {
+    fn default() -> Self {
+        Self::ZERO
+    }
 }
 
 impl ModelWeights {
@@ -112,8 +138,9 @@ impl ModelWeights {
     /// Number of parameters (f32) of the three networks.
     pub const PARAMS: usize = InertiaNet::PARAMS + GainNet::PARAMS + DisturbanceNet::PARAMS;
 
-    /// All-zero networks, as a constant (a `static` of it lives in `.bss`).
+    /// All-zero networks on the stock vehicle's mass, as a constant.
     pub const ZERO: Self = Self {
+        mass_kg: MASS_KG,
         inertia: Mlp::ZERO,
         gain: Mlp::ZERO,
         disturbance: Mlp::ZERO,
@@ -121,10 +148,19 @@ impl ModelWeights {
 
     /// True if every parameter is finite.
     pub fn is_finite(&self) -> bool {
-        self.inertia.is_finite() && self.gain.is_finite() && self.disturbance.is_finite()
+        self.mass_kg.is_finite()
+            && self.inertia.is_finite()
+            && self.gain.is_finite()
+            && self.disturbance.is_finite()
     }
 
-    /// Every parameter in blob order: J⁻¹, g, W networks, each as [`Mlp::params_mut`].
+    /// True if the mass is one a blob may carry: in [[`MIN_MASS_KG`], [`MAX_MASS_KG`]].
+    pub fn mass_is_valid(&self) -> bool {
+        (MIN_MASS_KG..=MAX_MASS_KG).contains(&self.mass_kg)
+    }
+
+    /// Every network parameter in blob order (after the mass): J⁻¹, g, W networks, each as
+    /// [`Mlp::params_mut`].
     pub fn params_mut(&mut self) -> impl Iterator<Item = &mut f32> {
         self.inertia
             .params_mut()

@@ -44,6 +44,10 @@ impl NominalModel {
 }
 
 impl HamiltonianModel for NominalModel {
+    fn mass_kg(&self) -> f32 {
+        self.mass_kg
+    }
+
     fn terms(&self, state: &State) -> ModelTerms {
         // Features: columns 0–2 a world-fixed force m·e_k seen in the body frame (Rᵀ e_k), so
         // a₀..₂ read as a specific force in m/s²; columns 3–5 a body torque along e_k.

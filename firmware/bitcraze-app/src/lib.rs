@@ -25,7 +25,7 @@ extern crate std;
 pub mod abi;
 
 use abi::{HfController, HfGains, HfOutput, HfSetpoint, HfState};
-use hamflight::model::{LearnedModel, GRAVITY_M_S2, MASS_KG};
+use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
 use hamflight::{FlightController, Gains, Setpoint, State};
 
 /// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
@@ -89,7 +89,7 @@ pub unsafe extern "C" fn hf_init(ctl: *mut HfController) {
     let inner = Inner {
         magic: MAGIC,
         last_faults: abi::FAULT_NOT_INIT,
-        ctl: FlightController::new(&model::MODEL, Gains::default()),
+        ctl: FlightController::new(&model::MODEL, Gains::for_mass_kg(model::MODEL.mass_kg())),
     };
     // SAFETY: non-null, writable and large and aligned enough (asserted above).
     unsafe { ctl.cast::<Inner>().write(inner) };
@@ -242,9 +242,10 @@ pub unsafe extern "C" fn hf_last_faults(ctl: *const HfController) -> u32 {
 /// `hf_self_test`: one hover step on a scratch controller gives no fault and m g ± 20 %.
 #[no_mangle]
 pub extern "C" fn hf_self_test() -> bool {
-    let mut ctl = FlightController::new(&model::MODEL, Gains::default());
+    let mass_kg = model::MODEL.mass_kg();
+    let mut ctl = FlightController::new(&model::MODEL, Gains::for_mass_kg(mass_kg));
     let o = ctl.step(&State::default(), &Setpoint::default(), 0.002);
-    let weight_n = MASS_KG * GRAVITY_M_S2;
+    let weight_n = mass_kg * GRAVITY_M_S2;
     !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n
 }
 
@@ -263,7 +264,7 @@ pub extern "C" fn hf_model_crc() -> u32 {
 /// `hf_mass_kg`.
 #[no_mangle]
 pub extern "C" fn hf_mass_kg() -> f32 {
-    MASS_KG
+    model::MODEL.mass_kg()
 }
 
 /// A panic is a bug (the API is panic-free): fault the CPU without formatting anything, so the

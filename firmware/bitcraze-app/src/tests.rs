@@ -96,7 +96,8 @@ fn null_pointers_are_reported_not_dereferenced() {
 #[test]
 fn steps_match_the_native_controller_bit_for_bit() {
     let mut c = init();
-    let mut native = FlightController::new(&model::MODEL, Gains::default());
+    let mut native =
+        FlightController::new(&model::MODEL, Gains::for_mass_kg(model::MODEL.mass_kg()));
     let (s, sp) = (displaced(), hover_sp());
     for _ in 0..50 {
         let out = step(&mut c, &s, &sp, 0.002);
@@ -192,7 +193,11 @@ fn compiled_in_model_is_the_blob() {
 }
 
 #[test]
-fn self_test_passes_and_mass_is_the_cores() {
+fn self_test_passes_and_mass_is_the_blobs() {
     assert!(hf_self_test());
-    assert_eq!(hf_mass_kg(), MASS_KG);
+    let path = env!("HAMFLIGHT_BLOB_PATH");
+    let bytes = std::fs::read(path).unwrap();
+    let from_blob = hamflight::blob::decode(&bytes).expect("a valid blob");
+    assert_eq!(hf_mass_kg(), from_blob.mass_kg);
+    assert!(hf_mass_kg() > 0.0);
 }

@@ -48,6 +48,8 @@ pub struct Windows {
     pub sample_hz: f32,
     /// States per window.
     pub window_len: usize,
+    /// The vehicle's mass (kg), from the dataset's manifest: the model's known mass.
+    pub mass_kg: f32,
     /// The realizations' true disturbances, in index order.
     pub realizations: Vec<RealizationInfo>,
     /// The manifest's vehicle: mass (kg) and what else it describes (for the report).
@@ -110,6 +112,7 @@ pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
         windows,
         sample_hz: ds.manifest.sample_hz as f32,
         window_len: spec.len,
+        mass_kg: ds.manifest.mass_kg as f32,
         realizations,
         mass_kg: ds.manifest.mass_kg,
         vehicle: ds.manifest.vehicle.clone(),

@@ -171,8 +171,8 @@ pub fn train(
 ) -> Trained {
     let device = Device::flex();
     let ad = device.clone().autodiff();
-    let c_plain = Consts::new(&device);
-    let c_ad = Consts::new(&ad);
+    let c_plain = Consts::new(&device, data.mass_kg);
+    let c_ad = Consts::new(&ad, data.mass_kg);
     let dt_s = 1.0 / data.sample_hz;
     let n_real = data.realizations.len().max(1);
     let init = init_weights(cfg.seed, cfg.init_out_gain);
@@ -283,7 +283,7 @@ pub fn train(
         .map(|c| std::array::from_fn(|k| c[k]))
         .collect();
     Trained {
-        weights: model.to_core(),
+        weights: model.to_core(&c_plain),
         a,
         curve,
         initial_val_loss,

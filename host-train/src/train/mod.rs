@@ -58,6 +58,9 @@ pub struct TrainConfig {
     pub features: usize,
     /// How windows are cut from the dataset's flights (default: 5 states every 4 samples).
     pub window: crate::dataset::WindowSpec,
+    /// The vehicle's mass (kg), carried in the blob; `None` (default) takes the dataset
+    /// manifest's `mass_kg`.
+    pub mass_kg: Option<f64>,
 }
 
 impl Default for TrainConfig {
@@ -76,6 +79,7 @@ impl Default for TrainConfig {
             hidden: HIDDEN,
             features: FEATURES,
             window: crate::dataset::WindowSpec::default(),
+            mass_kg: None,
         }
     }
 }
@@ -94,7 +98,25 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
             cfg.features
         );
     }
-    let windows = data::load(data_dir, cfg.window)?;
+    let mut windows = data::load(data_dir, cfg.window)?;
+    if let Some(m) = cfg.mass_kg {
+        if (m as f32 - windows.mass_kg).abs() > 0.01 * windows.mass_kg {
+            eprintln!(
+                "note: --mass-kg {m} overrides the dataset's mass_kg {} (`{}`)",
+                windows.mass_kg,
+                data_dir.join("manifest.json").display()
+            );
+        }
+        windows.mass_kg = m as f32;
+    }
+    let (lo, hi) = (hamflight::model::MIN_MASS_KG, hamflight::model::MAX_MASS_KG);
+    if !(lo..=hi).contains(&windows.mass_kg) {
+        bail!(
+            "vehicle mass {} kg is outside {lo}..={hi} kg (set it with --mass-kg, or fix the \
+             dataset's manifest.json)",
+            windows.mass_kg
+        );
+    }
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
     let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
     let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
@@ -150,6 +172,11 @@ pub struct TrainArgs {
     /// command per window; 1 uses every sample as a start).
     #[arg(long, default_value_t = crate::dataset::WindowSpec::default().stride)]
     pub stride: usize,
+    /// The vehicle's mass (kg), written into the blob: the controller's gains and the model's
+    /// M = diag(m I, J) use it. Default: the dataset manifest's `mass_kg` (what `collect` flew,
+    /// or what `import --mass-kg` was told).
+    #[arg(long, value_name = "KG")]
+    pub mass_kg: Option<f64>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -173,6 +200,7 @@ impl TrainArgs {
                 len: self.window_len,
                 stride: self.stride,
             },
+            mass_kg: self.mass_kg,
             ..TrainConfig::default()
         }
     }

@@ -12,7 +12,7 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::learned::{
     CONTROL_SCALE, INERTIA_INV_EPS, INERTIA_INV_SCALE_PER_KG_M2, TORQUE_SCALE_NM, WRENCH_SCALE,
 };
-use hamflight::model::{GRAVITY_M_S2, MASS_KG};
+use hamflight::model::GRAVITY_M_S2;
 use hamflight::nn::{Dense, Mlp};
 
 /// One two-hidden-layer tanh MLP as tensors.
@@ -157,13 +157,13 @@ pub struct Consts {
     wrench_scale: Tensor<2>,
     /// `[1, 4]` 1 / CONTROL_SCALE.
     control_inv_scale: Tensor<2>,
-    /// `[1, 3]` e₃ row for gravity, times m g.
-    weight_n: Tensor<2>,
+    /// The vehicle's mass m (kg): known, not learned (paper Sec. 4).
+    pub mass_kg: f32,
 }
 
 impl Consts {
-    /// Builds the constants on `device`.
-    pub fn new(device: &Device) -> Self {
+    /// Builds the constants on `device` for a vehicle of mass `mass_kg` (kg).
+    pub fn new(device: &Device, mass_kg: f32) -> Self {
         let mut l = vec![0f32; 54];
         // l index k → L position (row-major).
         for (k, pos) in [0usize, 3, 4, 6, 7, 8].into_iter().enumerate() {
@@ -192,10 +192,7 @@ impl Consts {
             eye: Tensor::<2>::eye(3, device).reshape([1, 3, 3]),
             wrench_scale: Tensor::from_data(TensorData::new(WRENCH_SCALE.to_vec(), [1, 6]), device),
             control_inv_scale: Tensor::from_data(TensorData::new(cinv, [1, 4]), device),
-            weight_n: Tensor::from_data(
-                TensorData::new(vec![0.0, 0.0, MASS_KG * GRAVITY_M_S2], [1, 3]),
-                device,
-            ),
+            mass_kg,
         }
     }
 }
@@ -300,8 +297,9 @@ impl TModel {
     }
 
     /// To the core's weights.
-    pub fn to_core(&self) -> hamflight::model::ModelWeights {
+    pub fn to_core(&self, c: &Consts) -> hamflight::model::ModelWeights {
         hamflight::model::ModelWeights {
+            mass_kg: c.mass_kg,
             inertia: self.inertia.to_core(),
             gain: self.gain.to_core(),
             disturbance: self.disturbance.to_core(),
@@ -386,26 +384,26 @@ impl TModel {
     }
 
     /// W(q) [B,6,p] (force rows m Rᵀ n_k, torque rows TORQUE_SCALE_NM t_k).
-    pub fn features(&self, rot: &Tensor<3>) -> Tensor<3> {
+    pub fn features(&self, c: &Consts, rot: &Tensor<3>) -> Tensor<3> {
         let o = self.feature_output(rot);
         let [b, _, p] = o.dims();
         let force = rot
             .clone()
             .swap_dims(1, 2)
             .matmul(o.clone().narrow(1, 0, 3))
-            .mul_scalar(MASS_KG);
+            .mul_scalar(c.mass_kg);
         let torque = o.narrow(1, 3, 3).mul_scalar(TORQUE_SCALE_NM);
         let _ = (b, p);
         Tensor::cat(vec![force, torque], 1)
     }
 
     /// d = W a as a body force and torque ([B,3] each).
-    pub fn disturbance(&self, rot: &Tensor<3>, a: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    pub fn disturbance(&self, c: &Consts, rot: &Tensor<3>, a: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
         let o = self.feature_output(rot);
         let [b, _, p] = o.dims();
         let oa = o.matmul(a.reshape([b, p, 1])).reshape([b, 6]);
         let n_world = oa.clone().narrow(1, 0, 3);
-        let force = mat_t_vec(rot.clone(), n_world).mul_scalar(MASS_KG);
+        let force = mat_t_vec(rot.clone(), n_world).mul_scalar(c.mass_kg);
         let torque = oa.narrow(1, 3, 3).mul_scalar(TORQUE_SCALE_NM);
         (force, torque)
     }
@@ -414,18 +412,17 @@ impl TModel {
     pub fn phase_rhs(&self, c: &Consts, x: &Phase, f: &Forcing) -> Phase {
         let ev = self.inertia_inv(c, &x.rot);
         let w = matvec(ev.jinv.clone(), x.pw.clone());
-        let v = x.pv.clone().div_scalar(MASS_KG);
+        let v = x.pv.clone().div_scalar(c.mass_kg);
         let (fu, tu) = self.control_wrench(c, &x.rot, f.u_norm.clone());
-        let (fd, td) = self.disturbance(&x.rot, f.a.clone());
+        let (fd, td) = self.disturbance(c, &x.rot, f.a.clone());
         let b = v.dims()[0];
         // Rᵀ (m g e₃) = m g r₃.
         let r3 = x.rot.clone().narrow(1, 2, 1).reshape([b, 3]);
         let pv_dot =
-            x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(MASS_KG * GRAVITY_M_S2) + fu + fd;
+            x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(c.mass_kg * GRAVITY_M_S2) + fu + fd;
         let dh = self.dh_dr(c, &ev, x.pw.clone());
         let shape_torque = x.rot.clone().cross(dh, 2).sum_dim(1).reshape([b, 3]);
         let pw_dot = x.pw.clone().cross(w.clone(), 1) + shape_torque + tu + td;
-        let _ = &c.weight_n;
         Phase {
             p: matvec(x.rot.clone(), v),
             rot: x.rot.clone().matmul(hat(c, w)),
@@ -450,13 +447,13 @@ impl TModel {
         let x = Phase {
             p,
             rot: rot.clone(),
-            pv: v.mul_scalar(MASS_KG),
+            pv: v.mul_scalar(c.mass_kg),
             pw: pw.clone(),
         };
         let d = self.phase_rhs(c, &x, f);
         let djinv = self.inertia_inv_dot(c, &ev, d.rot.clone());
         let w_dot = matvec(djinv, pw) + matvec(ev.jinv, d.pw);
-        (d.p, d.rot, d.pv.div_scalar(MASS_KG), w_dot)
+        (d.p, d.rot, d.pv.div_scalar(c.mass_kg), w_dot)
     }
 
     /// ζ → 𝔭 at the start of a window: 𝔭_v = m v, 𝔭_ω = J(q) ω.
@@ -472,7 +469,7 @@ impl TModel {
         Phase {
             p,
             rot,
-            pv: v.mul_scalar(MASS_KG),
+            pv: v.mul_scalar(c.mass_kg),
             pw: matvec(invert_sym3(ev.jinv), w),
         }
     }
@@ -481,7 +478,7 @@ impl TModel {
     pub fn velocities(&self, c: &Consts, x: &Phase) -> (Tensor<2>, Tensor<2>) {
         let ev = self.inertia_inv(c, &x.rot);
         (
-            x.pv.clone().div_scalar(MASS_KG),
+            x.pv.clone().div_scalar(c.mass_kg),
             matvec(ev.jinv, x.pw.clone()),
         )
     }
