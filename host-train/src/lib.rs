@@ -20,7 +20,8 @@
 //! - [`plot`]: SVG figures;
 //! - [`flight`]: the core's controller behind the host interface, and the full registry;
 //! - [`bridge`]: the JSON-lines bridge for external simulators;
-//! - [`demo`]: collect, train, fly every controller on paper-spiral, report.
+//! - [`demo`]: collect, train, fly every controller on paper-spiral, report;
+//! - [`vehicle_study`]: log, import, train and fly a vehicle the nominal model does not know.
 #![warn(missing_docs)]
 
 pub mod baselines;
@@ -42,6 +43,7 @@ pub mod scenario;
 pub mod train;
 pub mod usdlog;
 pub mod usdrecord;
+pub mod vehicle_study;
 
 pub use controller::{Controller, TrajectoryPoint};
 pub use plant::{Plant, PlantState, VehicleParams};

@@ -37,6 +37,11 @@ enum Command {
     /// paper-spiral with pid, geometric, geometric-adaptive, learned and adaptive; writes
     /// DIR/report.json and SVG figures, prints a table.
     Demo(host_train::demo::DemoArgs),
+    /// Issue 10's study on a vehicle the nominal model does not know (0.034 kg, inertia ×1.3,
+    /// rotor 3 at 90 %, 20 ms motor lag, drag, noise): log Lee flights as uSD logs, import,
+    /// train N seeds, fly the calm spiral and paper-spiral on it; writes DIR/report.json and
+    /// DIR/table.md, prints the table.
+    VehicleStudy(host_train::vehicle_study::VehicleStudyArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -132,6 +137,15 @@ fn run(cli: Cli) -> Result<()> {
                 "report and figures in {} ({:.0} s)",
                 args.out.display(),
                 t0.elapsed().as_secs_f64()
+            );
+        }
+        Command::VehicleStudy(args) => {
+            let r = host_train::vehicle_study::run(&args)?;
+            println!("{}", host_train::vehicle_study::table(&r));
+            println!(
+                "report.json, table.md, logs/, data/ and the blobs in {} ({:.0} s)",
+                args.out.display(),
+                r.wall_s
             );
         }
     }

@@ -52,8 +52,8 @@ pub struct Windows {
     pub mass_kg: f32,
     /// The realizations' true disturbances, in index order.
     pub realizations: Vec<RealizationInfo>,
-    /// The manifest's vehicle: mass (kg) and what else it describes (for the report).
-    pub mass_kg: f64,
+    /// The manifest's `mass_kg` (kg), even when `train --mass-kg` overrides the model's.
+    pub manifest_mass_kg: f32,
     /// The manifest's inertia, rotor efficiencies and motor lag, when given.
     pub vehicle: dataset::VehicleDescription,
 }
@@ -114,7 +114,7 @@ pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
         window_len: spec.len,
         mass_kg: ds.manifest.mass_kg as f32,
         realizations,
-        mass_kg: ds.manifest.mass_kg,
+        manifest_mass_kg: ds.manifest.mass_kg as f32,
         vehicle: ds.manifest.vehicle.clone(),
     })
 }

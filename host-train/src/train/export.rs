@@ -2,6 +2,9 @@
 //! file) and the JSON report next to it (`FILE.hfw.json`): configuration, training curve,
 //! held-out N-step prediction errors of the learned and nominal models, the learned J (hover)
 //! and g against the true ones, and the a_j with the true disturbances of their realizations.
+//! The "true" values are the dataset manifest's vehicle ([`crate::dataset::VehicleDescription`]
+//! and `mass_kg`): the inertia is omitted (null) when the manifest does not give it, and the
+//! true g assumes nominal rotors when it gives no rotor efficiencies.
 
 use super::data::Windows;
 use super::r#loop::{EpochStats, Trained};
@@ -10,7 +13,7 @@ use anyhow::Result;
 use hamflight::lie;
 use hamflight::model::{
     rk4_step, true_input_gain, HamiltonianModel, LearnedModel, ModelWeights, NominalModel, State,
-    FEATURES, GRAVITY_M_S2, MASS_KG,
+    FEATURES, GRAVITY_M_S2,
 };
 use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
@@ -70,15 +73,27 @@ pub struct TrainReport {
     pub heldout_learned: PredictionErrors,
     /// Held-out errors: learned model with a = 0 (no disturbance compensation).
     pub heldout_learned_no_disturbance: PredictionErrors,
-    /// Held-out errors: the nominal model (true constants, no disturbance).
+    /// Held-out errors: the stock vehicle's nominal model (the CF2X's constants, no
+    /// disturbance).
     pub heldout_nominal: PredictionErrors,
+    /// Held-out errors: the nominal model with the manifest's mass and inertia (null when the
+    /// manifest gives no inertia).
+    pub heldout_nominal_true_vehicle: Option<PredictionErrors>,
+    /// The model's mass (kg): the blob's (`--mass-kg`, else the manifest's).
+    pub mass_kg: f32,
+    /// The dataset's mass (kg), the manifest's `mass_kg`.
+    pub true_mass_kg: f32,
+    /// The manifest's motor time constant (s): the commands were realized through it at import.
+    pub motor_tau_s: Option<f64>,
     /// Learned J at hover (R = I), kg·m², row-major.
     pub learned_inertia_hover_kg_m2: [[f32; 3]; 3],
-    /// The true J (kg·m²).
-    pub true_inertia_kg_m2: [[f32; 3]; 3],
+    /// The true J (kg·m²), from the manifest (null when it gives none).
+    pub true_inertia_kg_m2: Option<[[f32; 3]; 3]>,
     /// Learned g at hover, rows body force x, y, z, torque x, y, z.
     pub learned_gain_hover: [[f32; 4]; 6],
-    /// The true g.
+    /// The true g of the described vehicle in the model's units: the realized wrench per unit
+    /// of commanded wrench through the manifest's rotor efficiencies (nominal rotors when it
+    /// gives none), force rows times the model's mass over the true mass.
     pub true_gain: [[f32; 4]; 6],
     /// Per realization: a_j and the true disturbance.
     pub realizations: Vec<RealizationReport>,
@@ -129,17 +144,52 @@ const ROTORS: [(f32, f32, f32); 4] = [
 /// km / kf (m): reaction torque per newton of thrust.
 const KM_OVER_KF_M: f32 = 7.94e-12 / 3.16e-10;
 
-/// The true disturbance wrench at hover (R = I): body force m w + Σ ΔFᵢ e₃, torque Σ rᵢ × ΔFᵢ e₃
-/// plus the reaction-torque deficit, with ΔFᵢ = −(1 − δᵢ) m g / 4 at hover thrust.
-pub fn true_wrench_at_hover(wind_m_s2: &[f32; 3], eff: &[f32; 4]) -> [f32; 6] {
-    let mut f = Vector3::from(*wind_m_s2) * MASS_KG;
+/// The true disturbance wrench at hover (R = I) of a vehicle of mass `true_mass_kg`, in the
+/// units of a model of mass `model_mass_kg` (force rows scaled by their ratio): body force m w +
+/// Σ ΔFᵢ e₃, torque Σ rᵢ × ΔFᵢ e₃ plus the reaction-torque deficit, with
+/// ΔFᵢ = −(1 − δᵢ) m g / 4 at hover thrust.
+pub fn true_wrench_at_hover(
+    wind_m_s2: &[f32; 3],
+    eff: &[f32; 4],
+    model_mass_kg: f32,
+    true_mass_kg: f32,
+) -> [f32; 6] {
+    let ratio = model_mass_kg / true_mass_kg;
+    let mut f = Vector3::from(*wind_m_s2) * true_mass_kg;
     let mut t = Vector3::zeros();
     for (&(x, y, s), &d) in ROTORS.iter().zip(eff.iter()) {
-        let df = -(1.0 - d) * MASS_KG * GRAVITY_M_S2 / 4.0;
+        let df = -(1.0 - d) * true_mass_kg * GRAVITY_M_S2 / 4.0;
         f.z += df;
         t += Vector3::new(y * df, -x * df, s * KM_OVER_KF_M * df);
     }
+    f *= ratio;
     [f.x, f.y, f.z, t.x, t.y, t.z]
+}
+
+/// The true input gain g (R = I) of the CF2X airframe whose rotors make `eff` of their nominal
+/// thrust: the realized wrench per unit of commanded wrench (the mixer inverse, the rotors'
+/// factors, the mixer), force rows times `model_mass_kg / true_mass_kg`.
+pub fn true_gain_of(eff: &[f32; 4], model_mass_kg: f32, true_mass_kg: f32) -> [[f32; 4]; 6] {
+    // Commanded wrench → rotor thrusts: the inverse of [f; τx; τy; τz] = A T.
+    let a = nalgebra::Matrix4::from_fn(|r, c| {
+        let (x, y, s) = ROTORS[c];
+        [1.0, y, -x, s * KM_OVER_KF_M][r]
+    });
+    let a_inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix4::identity);
+    let realized = a * nalgebra::Matrix4::from_diagonal(&Vector4::from(*eff)) * a_inv;
+    let g = true_input_gain();
+    let ratio = model_mass_kg / true_mass_kg;
+    std::array::from_fn(|r| {
+        std::array::from_fn(|c| {
+            // Rows 2..5 of g are the identity on [f; τ]: apply the realized map there.
+            let v = if r >= 2 { realized[(r - 2, c)] } else { g[(r, c)] };
+            if r < 3 {
+                v * ratio
+            } else {
+                v
+            }
+        })
+    })
 }
 
 /// Builds the report.
@@ -158,7 +208,17 @@ pub fn report(
         .inertia_inv
         .try_inverse()
         .unwrap_or_else(nalgebra::Matrix3::zeros);
-    let true_j = nominal.inertia_kg_m2;
+    let model_mass = terms.mass_kg;
+    let true_mass = data.manifest_mass_kg;
+    let true_j = data
+        .vehicle
+        .inertia_kg_m2
+        .map(|j| nalgebra::Matrix3::from_diagonal(&Vector3::from(j.map(|x| x as f32))));
+    let true_vehicle = true_j.map(|j| NominalModel::new(true_mass, j));
+    let rotor_eff = data
+        .vehicle
+        .rotor_efficiency
+        .map_or([1.0; 4], |e| e.map(|x| x as f32));
     let realizations = data
         .realizations
         .iter()
@@ -172,16 +232,21 @@ pub fn report(
                 a: *a,
                 learned_wrench_at_hover: std::array::from_fn(|k| d[k]),
                 true_wrench_at_hover: match (r.wind_m_s2, r.rotor_efficiency) {
-                    (Some(w), Some(e)) => Some(true_wrench_at_hover(&w, &e)),
-                    (Some(w), None) => Some(true_wrench_at_hover(&w, &[1.0; 4])),
-                    (None, Some(e)) => Some(true_wrench_at_hover(&[0.0; 3], &e)),
+                    (Some(w), Some(e)) => {
+                        Some(true_wrench_at_hover(&w, &e, model_mass, true_mass))
+                    }
+                    (Some(w), None) => {
+                        Some(true_wrench_at_hover(&w, &[1.0; 4], model_mass, true_mass))
+                    }
+                    (None, Some(e)) => {
+                        Some(true_wrench_at_hover(&[0.0; 3], &e, model_mass, true_mass))
+                    }
                     (None, None) => None,
                 },
             }
         })
         .collect();
     let g = terms.gain;
-    let tg = true_input_gain();
     TrainReport {
         config: cfg.clone(),
         train_windows: train_ids.len(),
@@ -193,10 +258,16 @@ pub fn report(
         heldout_learned: prediction_errors(&learned, data, heldout, Some(&trained.a)),
         heldout_learned_no_disturbance: prediction_errors(&learned, data, heldout, None),
         heldout_nominal: prediction_errors(&nominal, data, heldout, None),
+        heldout_nominal_true_vehicle: true_vehicle
+            .map(|m| prediction_errors(&m, data, heldout, None)),
+        mass_kg: model_mass,
+        true_mass_kg: true_mass,
+        motor_tau_s: data.vehicle.motor_tau_s,
         learned_inertia_hover_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| j[(r, c)])),
-        true_inertia_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| true_j[(r, c)])),
+        true_inertia_kg_m2: true_j
+            .map(|tj| std::array::from_fn(|r| std::array::from_fn(|c| tj[(r, c)]))),
         learned_gain_hover: std::array::from_fn(|r| std::array::from_fn(|c| g[(r, c)])),
-        true_gain: std::array::from_fn(|r| std::array::from_fn(|c| tg[(r, c)])),
+        true_gain: true_gain_of(&rotor_eff, model_mass, true_mass),
         realizations,
     }
 }

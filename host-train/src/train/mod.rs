@@ -233,6 +233,16 @@ pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
         last(&r.heldout_nominal.vel_m_s),
         last(&r.heldout_nominal.rate_rad_s),
     );
+    if let Some(n) = &r.heldout_nominal_true_vehicle {
+        println!(
+            "held-out {}-step error of the nominal model with the dataset's mass and inertia: {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            n.pos_m.len(),
+            last(&n.pos_m),
+            last(&n.rot_rad),
+            last(&n.vel_m_s),
+            last(&n.rate_rad_s),
+        );
+    }
     println!(
         "wrote {} and {}.json",
         args.out.display(),
