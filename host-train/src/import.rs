@@ -138,10 +138,10 @@ pub struct ImportArgs {
     #[arg(long, default_value_t = 9.8)]
     pub gravity_m_s2: f64,
     /// Vehicle inertia diag(J) (kg·m²), comma-separated; for the training report only.
-    #[arg(long, value_delimiter = ',', num_args = 3, value_name = "JX,JY,JZ")]
+    #[arg(long, value_delimiter = ',', value_name = "JX,JY,JZ")]
     pub inertia_kg_m2: Option<Vec<f64>>,
     /// The vehicle's own rotor thrust factors δ₁..δ₄, when known; for the training report only.
-    #[arg(long, value_delimiter = ',', num_args = 4, value_name = "D1,D2,D3,D4")]
+    #[arg(long, value_delimiter = ',', value_name = "D1,D2,D3,D4")]
     pub rotor_efficiency: Option<Vec<f64>>,
     /// First-order motor time constant (s): store the realized command (the logged one through
     /// the motor lag, per rotor) instead of the logged one; see the module docs.
@@ -414,7 +414,12 @@ pub fn median_dt_s(samples: &[Sample]) -> Option<f64> {
 /// Replaces each sample's commanded wrench by the realized one under a first-order motor lag of
 /// `tau_s` (module docs, "Motor dynamics"), stretch by stretch ([`dataset::segments`] at
 /// `sample_hz`); `params` gives the mixer (the CF2X's rotor geometry and coefficients).
-pub fn realize_commands(samples: &mut [Sample], sample_hz: f64, tau_s: f64, params: &VehicleParams) {
+pub fn realize_commands(
+    samples: &mut [Sample],
+    sample_hz: f64,
+    tau_s: f64,
+    params: &VehicleParams,
+) {
     if tau_s.is_nan() || tau_s <= 0.0 {
         return;
     }
@@ -537,7 +542,10 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
     if !positive(args.mass_kg) || !positive(args.gravity_m_s2) {
         bail!("--mass-kg and --gravity-m-s2 must be positive");
     }
-    if args.motor_tau_s.is_some_and(|t| !(t.is_finite() && t >= 0.0)) {
+    if args
+        .motor_tau_s
+        .is_some_and(|t| !(t.is_finite() && t >= 0.0))
+    {
         bail!("--motor-tau-s must be a time constant ≥ 0 s");
     }
     let inertia: Option<[f64; 3]> = match &args.inertia_kg_m2 {

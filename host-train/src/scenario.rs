@@ -632,14 +632,12 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
     if v.mass_kg.is_some_and(|m| !(m.is_finite() && m > 0.0)) {
         bail!("key `vehicle.mass_kg`: expected a positive mass (kg)");
     }
-    if v
-        .inertia_kg_m2
+    if v.inertia_kg_m2
         .is_some_and(|j| !j.iter().all(|x| x.is_finite() && *x > 0.0))
     {
         bail!("key `vehicle.inertia_kg_m2`: expected three positive moments (kg·m²)");
     }
-    if v
-        .rotor_efficiency
+    if v.rotor_efficiency
         .is_some_and(|e| !e.iter().all(|x| x.is_finite() && *x > 0.0 && *x <= 2.0))
     {
         bail!("key `vehicle.rotor_efficiency`: expected four numbers in (0, 2]");

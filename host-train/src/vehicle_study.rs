@@ -32,10 +32,10 @@ use crate::eval::{self, Report};
 use crate::flight::{self, CoreController};
 use crate::fsutil::{write_atomic, write_json_atomic};
 use crate::import::{self, ImportArgs, LogFormat, LEE_COMMAND_VARS};
+use crate::plant::{WindSine, WindStep};
 use crate::scenario::{DisturbanceSpec, Scenario, Trajectory};
 use crate::train::{self, TrainConfig};
 use crate::usdrecord::UsdRecorder;
-use crate::plant::{WindSine, WindStep};
 
 /// The calm spiral on the heavy vehicle (built in, so the study runs from any directory).
 pub const CALM_SPIRAL_TOML: &str = include_str!("../../scenarios/mismatch-calm-spiral.toml");
@@ -43,13 +43,30 @@ pub const CALM_SPIRAL_TOML: &str = include_str!("../../scenarios/mismatch-calm-s
 pub const PAPER_SPIRAL_TOML: &str = include_str!("../../scenarios/mismatch-paper-spiral.toml");
 
 /// The controllers of the table, in order: (key, description).
-pub const STUDY_CONTROLLERS: [(&str, &str); 6] = [
-    ("geometric", "Lee geometric (true mass and inertia; the logging controller)"),
-    ("ida-pbc-stock", "nominal IDA-PBC, stock vehicle's constants"),
+pub const STUDY_CONTROLLERS: [(&str, &str); 8] = [
+    (
+        "geometric",
+        "Lee geometric (true mass and inertia; the logging controller)",
+    ),
+    (
+        "ida-pbc-stock",
+        "nominal IDA-PBC, stock vehicle's constants",
+    ),
     ("ida-pbc-true", "nominal IDA-PBC, TRUE mass and inertia"),
-    ("geometric-adaptive", "geometric-adaptive (nominal, stock constants)"),
+    (
+        "geometric-adaptive",
+        "geometric-adaptive (nominal, stock constants)",
+    ),
     ("learned", "learned, no adaptation"),
     ("adaptive", "adaptive (learned)"),
+    (
+        "learned-no-lag",
+        "learned, no adaptation, trained on the commanded wrench (no --motor-tau-s)",
+    ),
+    (
+        "adaptive-no-lag",
+        "adaptive (learned), trained on the commanded wrench (no --motor-tau-s)",
+    ),
 ];
 
 /// Arguments of `host-train vehicle-study`.
@@ -61,6 +78,9 @@ pub struct VehicleStudyArgs {
     /// Training seeds (0..N).
     #[arg(long, default_value_t = 3)]
     pub seeds: u64,
+    /// Skip the comparison blob trained without the motor-lag filter (seed 0).
+    #[arg(long)]
+    pub no_lag_comparison: bool,
     /// Training epochs per seed.
     #[arg(long, default_value_t = 20)]
     pub epochs: usize,
@@ -88,6 +108,7 @@ impl VehicleStudyArgs {
         Self {
             out: out.to_path_buf(),
             seeds: 3,
+            no_lag_comparison: false,
             epochs: 20,
             flight_s: 10.0,
             vehicle: None,
@@ -109,6 +130,8 @@ pub struct PlannedFlight {
     pub disturbance: DisturbanceSpec,
     /// Flown in calm air: imported with `--calm` (a_j = 0).
     pub calm: bool,
+    /// Desired yaw rate (rad/s): excites the yaw axis, so that J_z is identifiable.
+    pub yaw_rate_rad_s: f64,
 }
 
 fn wind(w: [f64; 3]) -> DisturbanceSpec {
@@ -140,36 +163,42 @@ pub fn flight_plan() -> Vec<PlannedFlight> {
             trajectory: hover(1.0),
             disturbance: DisturbanceSpec::default(),
             calm: true,
+            yaw_rate_rad_s: 0.8,
         },
         PlannedFlight {
             name: "circle-calm",
             trajectory: circle(0.6, 6.0),
             disturbance: DisturbanceSpec::default(),
             calm: true,
+            yaw_rate_rad_s: 0.0,
         },
         PlannedFlight {
             name: "spiral-calm",
             trajectory: spiral(0.4, 5.0, 0.04),
             disturbance: DisturbanceSpec::default(),
             calm: true,
+            yaw_rate_rad_s: -0.4,
         },
         PlannedFlight {
             name: "hover-wind",
             trajectory: hover(0.8),
             disturbance: wind([0.5, -0.4, 0.0]),
             calm: false,
+            yaw_rate_rad_s: -0.6,
         },
         PlannedFlight {
             name: "circle-wind",
             trajectory: circle(0.5, 8.0),
             disturbance: wind([-0.6, 0.3, 0.0]),
             calm: false,
+            yaw_rate_rad_s: 0.5,
         },
         PlannedFlight {
             name: "spiral-wind",
             trajectory: spiral(0.5, 7.0, 0.03),
             disturbance: wind([0.4, 0.6, 0.0]),
             calm: false,
+            yaw_rate_rad_s: 0.0,
         },
         PlannedFlight {
             name: "circle-gust",
@@ -188,6 +217,7 @@ pub fn flight_plan() -> Vec<PlannedFlight> {
                 ..DisturbanceSpec::default()
             },
             calm: false,
+            yaw_rate_rad_s: 0.3,
         },
         PlannedFlight {
             name: "spiral-weak-rotor",
@@ -198,6 +228,7 @@ pub fn flight_plan() -> Vec<PlannedFlight> {
                 ..DisturbanceSpec::default()
             },
             calm: false,
+            yaw_rate_rad_s: 0.0,
         },
     ]
 }
@@ -224,6 +255,8 @@ pub struct Flown {
 pub struct SeedSummary {
     /// Training seed.
     pub seed: u64,
+    /// Trained on the realized command (`import --motor-tau-s`); false: on the commanded one.
+    pub motor_lag_filter: bool,
     /// The blob.
     pub weights: String,
     /// Training windows.
@@ -285,12 +318,7 @@ fn last4(e: &train::export::PredictionErrors) -> [f64; 4] {
     [l(&e.pos_m), l(&e.rot_rad), l(&e.vel_m_s), l(&e.rate_rad_s)]
 }
 
-fn fly_one(
-    sc: &Scenario,
-    key: &str,
-    seed: Option<u64>,
-    ctrl: &mut dyn Controller,
-) -> Flown {
+fn fly_one(sc: &Scenario, key: &str, seed: Option<u64>, ctrl: &mut dyn Controller) -> Flown {
     let log = eval::fly(sc, ctrl);
     let r = Report::from_log(&log, None);
     Flown {
@@ -310,8 +338,16 @@ fn fly_one(
 /// or I/O error.
 pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     let t0 = Instant::now();
-    let base = load_or_builtin(args.vehicle.as_deref(), CALM_SPIRAL_TOML, "mismatch-calm-spiral")?;
-    let calm = load_or_builtin(args.calm.as_deref(), CALM_SPIRAL_TOML, "mismatch-calm-spiral")?;
+    let base = load_or_builtin(
+        args.vehicle.as_deref(),
+        CALM_SPIRAL_TOML,
+        "mismatch-calm-spiral",
+    )?;
+    let calm = load_or_builtin(
+        args.calm.as_deref(),
+        CALM_SPIRAL_TOML,
+        "mismatch-calm-spiral",
+    )?;
     let disturbed = load_or_builtin(
         args.disturbed.as_deref(),
         PAPER_SPIRAL_TOML,
@@ -333,7 +369,8 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
         spec.trajectory = pf.trajectory.clone();
         spec.disturbance = pf.disturbance.clone();
         spec.start = None;
-        spec.yaw_rate_rad_s = 0.0;
+        spec.yaw_rad = 0.0;
+        spec.yaw_rate_rad_s = pf.yaw_rate_rad_s;
         let sc = Scenario::from_spec(pf.name, spec)?;
         let mut lee = crate::baselines::by_name("geometric", &sc)?;
         let mut rec = UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
@@ -383,20 +420,41 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
         })
         .collect();
 
+    let no_lag_dir = args.out.join("data-no-lag");
+    if !args.no_lag_comparison {
+        import::run(&ImportArgs {
+            out: no_lag_dir.clone(),
+            motor_tau_s: None,
+            ..imp.clone()
+        })?;
+    }
+
     // 3. Train.
     let mut seeds = Vec::new();
     let mut blobs = Vec::new();
-    for seed in 0..args.seeds {
+    let mut runs: Vec<(u64, bool)> = (0..args.seeds).map(|k| (k, true)).collect();
+    if !args.no_lag_comparison {
+        runs.push((0, false));
+    }
+    for (seed, lag) in runs {
         let cfg = TrainConfig {
             epochs: args.epochs,
             seed,
             ..TrainConfig::default()
         };
-        let blob = args.out.join(format!("seed-{seed}.hfw"));
-        let r = train::run(&cfg, &data_dir, &blob, args.quiet)?;
+        let (dir, blob) = if lag {
+            (&data_dir, args.out.join(format!("seed-{seed}.hfw")))
+        } else {
+            (
+                &no_lag_dir,
+                args.out.join(format!("no-lag-seed-{seed}.hfw")),
+            )
+        };
+        let r = train::run(&cfg, dir, &blob, args.quiet)?;
         let j = r.learned_inertia_hover_kg_m2;
         seeds.push(SeedSummary {
             seed,
+            motor_lag_filter: lag,
             weights: blob.display().to_string(),
             train_windows: r.train_windows,
             heldout_windows: r.heldout_windows,
@@ -407,7 +465,7 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
             learned_inertia_diag_kg_m2: [j[0][0], j[1][1], j[2][2]],
             learned_thrust_gain: r.learned_gain_hover[2][0],
         });
-        blobs.push((seed, blob));
+        blobs.push((seed, lag, blob));
     }
 
     // 4. Fly the table.
@@ -437,10 +495,15 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
             None,
             &mut flight::geometric_adaptive(),
         ));
-        for (seed, blob) in &blobs {
+        for (seed, lag, blob) in &blobs {
             for key in ["learned", "adaptive"] {
                 let mut c = flight::core_by_name(key, Some(blob))?;
-                flights.push(fly_one(sc, key, Some(*seed), c.as_mut()));
+                let label = if *lag {
+                    key.to_string()
+                } else {
+                    format!("{key}-no-lag")
+                };
+                flights.push(fly_one(sc, &label, Some(*seed), c.as_mut()));
             }
         }
     }
@@ -479,19 +542,33 @@ pub fn table(r: &StudyReport) -> String {
                 .collect::<Vec<_>>()
                 .join(" / ")
         };
-        let label = if matches!(key, "learned" | "adaptive") {
-            format!("{desc} (seeds 0..{})", r.seeds.len())
-        } else {
+        let seeds: Vec<String> = r
+            .results(key, a)
+            .iter()
+            .filter_map(|f| f.seed)
+            .map(|k| k.to_string())
+            .collect();
+        if seeds.is_empty() && key.ends_with("-no-lag") {
+            continue;
+        }
+        let label = if seeds.is_empty() {
             desc.to_string()
+        } else {
+            format!("{desc}, seed {}", seeds.join(" / "))
         };
         s += &format!("| {label} | {} | {} |\n", cell(a), cell(b));
     }
-    s += "\n| seed | windows (train / held out) | held-out last-step error, rate (rad/s): learned / nominal stock / nominal true | velocity (m/s): learned / nominal stock / nominal true | learned diag J (1e-5 kg·m²) | learned thrust gain |\n| --- | --- | --- | --- | --- | --- |\n";
+    s += "\n| seed | command | windows (train / held out) | held-out last-step error, rate (rad/s): learned / nominal stock / nominal true | velocity (m/s): learned / nominal stock / nominal true | learned diag J (1e-5 kg·m²) | learned thrust gain |\n| --- | --- | --- | --- | --- | --- | --- |\n";
     for sd in &r.seeds {
         let t = sd.heldout_nominal_true.unwrap_or([f64::NAN; 4]);
         s += &format!(
-            "| {} | {} / {} | {:.3} / {:.3} / {:.3} | {:.2e} / {:.2e} / {:.2e} | {:.2}, {:.2}, {:.2} | {:.3} |\n",
+            "| {} | {} | {} / {} | {:.3} / {:.3} / {:.3} | {:.2e} / {:.2e} / {:.2e} | {:.2}, {:.2}, {:.2} | {:.3} |\n",
             sd.seed,
+            if sd.motor_lag_filter {
+                "realized (τ)"
+            } else {
+                "commanded"
+            },
             sd.train_windows,
             sd.heldout_windows,
             sd.heldout_learned[3],

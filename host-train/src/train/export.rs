@@ -182,7 +182,11 @@ pub fn true_gain_of(eff: &[f32; 4], model_mass_kg: f32, true_mass_kg: f32) -> [[
     std::array::from_fn(|r| {
         std::array::from_fn(|c| {
             // Rows 2..5 of g are the identity on [f; τ]: apply the realized map there.
-            let v = if r >= 2 { realized[(r - 2, c)] } else { g[(r, c)] };
+            let v = if r >= 2 {
+                realized[(r - 2, c)]
+            } else {
+                g[(r, c)]
+            };
             if r < 3 {
                 v * ratio
             } else {
@@ -232,9 +236,7 @@ pub fn report(
                 a: *a,
                 learned_wrench_at_hover: std::array::from_fn(|k| d[k]),
                 true_wrench_at_hover: match (r.wind_m_s2, r.rotor_efficiency) {
-                    (Some(w), Some(e)) => {
-                        Some(true_wrench_at_hover(&w, &e, model_mass, true_mass))
-                    }
+                    (Some(w), Some(e)) => Some(true_wrench_at_hover(&w, &e, model_mass, true_mass)),
                     (Some(w), None) => {
                         Some(true_wrench_at_hover(&w, &[1.0; 4], model_mass, true_mass))
                     }

@@ -1,0 +1,295 @@
+//! Issue 10's vehicle the nominal model does not know (`scenarios/mismatch-*.toml`: 0.034 kg,
+//! inertia ×1.3, rotor 3 at 90 %, 20 ms motor lag, rotor drag, noisy states): the scenario's
+//! `[vehicle]` table, the import's motor-lag filter against the plant's lag, and the whole
+//! study (`host-train vehicle-study`, sized down): Lee flights logged as uSD logs, imported
+//! with the vehicle's mass, inertia and motor τ, three training seeds, then the calm spiral
+//! and paper-spiral on that vehicle.
+//! Run in release: `cargo test --release -p host-train --test vehicle_mismatch -- --nocapture`.
+
+use std::path::{Path, PathBuf};
+
+use host_train::dataset::{self, Sample};
+use host_train::import::realize_commands;
+use host_train::plant::{Disturbance, Effects, Plant, PlantState, VehicleParams};
+use host_train::vehicle_study::{self, StudyReport, VehicleStudyArgs};
+use host_train::Scenario;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn scenario(name: &str) -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(format!("{name}.toml"));
+    Scenario::load(path).unwrap()
+}
+
+#[test]
+fn vehicle_table_sets_mass_inertia_rotors_and_keeps_the_motors() {
+    let stock = VehicleParams::cf2x();
+    for name in ["mismatch-calm-spiral", "mismatch-paper-spiral"] {
+        let s = scenario(name);
+        let v = &s.vehicle;
+        assert_eq!(v.mass_kg, 0.034);
+        for (j, j0) in v.inertia_kg_m2.iter().zip(stock.inertia_kg_m2) {
+            assert!((j / j0 - 1.3).abs() < 1e-3, "{j} vs 1.3 × {j0}");
+        }
+        assert_eq!(v.rotor_efficiency, [1.0, 1.0, 0.9, 1.0]);
+        assert!((v.max_rpm() - stock.max_rpm()).abs() < 1e-6);
+        assert_eq!(s.spec.effects.motor_tau_s, 0.02);
+        assert!(s.spec.effects.rotor_drag);
+        let realistic = scenario("paper-spiral-realistic");
+        assert_eq!(s.spec.effects.noise, realistic.spec.effects.noise);
+        // The baselines and the plant fly that vehicle.
+        assert_eq!(s.plant().params, *v);
+    }
+    // The vehicle's own rotor factor multiplies the disturbance's: rotor 3 at 0.9 × 1.
+    let p = scenario("mismatch-paper-spiral").plant();
+    let f = p.forces(0.0, p.state(), &[15_000.0; 4]);
+    let t0 = stock.kf_n_per_rpm2 * 15_000f64.powi(2);
+    let want = [0.8 * t0, 0.8 * t0, 0.9 * t0, t0];
+    for (got, want) in f.rotor_thrust_n.iter().zip(want) {
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
+}
+
+#[test]
+fn bad_vehicle_keys_are_errors_naming_the_key() {
+    let base = "duration_s = 1.0\n[trajectory]\nkind = \"hover\"\nposition_m = [0, 0, 1]\n";
+    for (extra, key) in [
+        ("[vehicle]\nmass_kg = -1.0\n", "vehicle.mass_kg"),
+        (
+            "[vehicle]\ninertia_kg_m2 = [1e-5, 0.0, 1e-5]\n",
+            "vehicle.inertia_kg_m2",
+        ),
+        (
+            "[vehicle]\nrotor_efficiency = [1, 1, 0, 1]\n",
+            "vehicle.rotor_efficiency",
+        ),
+        ("[vehicle]\nwheels = 4\n", "wheels"),
+    ] {
+        let e = Scenario::from_toml_str(&format!("{base}{extra}"), "t.toml", "t").unwrap_err();
+        let chain = format!("{e:#}");
+        assert!(chain.contains("t.toml"), "{chain}");
+        assert!(chain.contains(key), "{chain}");
+    }
+}
+
+/// The import's filter gives the wrench the plant's lagged rotors really make, step by step:
+/// a random rotor command at 500 Hz drives the plant's first-order lag (fine physics steps),
+/// and the mean realized wrench over each tick matches `realize_commands`.
+#[test]
+fn motor_lag_filter_matches_the_plants_rotors() {
+    let params = VehicleParams::cf2x();
+    let effects = Effects {
+        motor_tau_s: 0.02,
+        ..Effects::default()
+    };
+    let mut plant = Plant::new(
+        params.clone(),
+        Disturbance::default(),
+        effects,
+        PlantState::at_rest(nalgebra::Vector3::new(0.0, 0.0, 100.0), 0.0),
+    );
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let dt = 0.002;
+    let sub = 200;
+    let hover = params.hover_rpm();
+    let mut cmd = [hover; 4];
+    plant.set_rotor_rpm(cmd);
+    let mut samples = Vec::new();
+    let mut truth = Vec::new();
+    for k in 0..300 {
+        if k % 10 == 0 && k > 0 {
+            cmd = std::array::from_fn(|_| hover * rng.gen_range(0.7..1.3));
+        }
+        let mut mean = [0.0; 4];
+        for _ in 0..sub {
+            // Midpoint of each fine step.
+            let before = plant.rotor_rpm();
+            plant.step(cmd, dt / sub as f64);
+            let after = plant.rotor_rpm();
+            for i in 0..4 {
+                let m = 0.5 * (before[i] + after[i]);
+                mean[i] += m * m / sub as f64;
+            }
+        }
+        truth.push(params.wrench_of_rpm_squared(mean));
+        samples.push(Sample {
+            t_s: k as f64 * dt,
+            state: PlantState::default(),
+            wrench: params.nominal_wrench(cmd),
+            rpm: None,
+            acc_body_m_s2: None,
+        });
+    }
+    let commanded: Vec<[f64; 4]> = samples.iter().map(|s| s.wrench).collect();
+    realize_commands(&mut samples, 500.0, 0.02, &params);
+    let mut worst_realized = 0f64;
+    let mut worst_commanded = 0f64;
+    for ((s, t), c) in samples.iter().zip(&truth).zip(&commanded) {
+        let scale = [0.3, 3e-3, 3e-3, 1e-4];
+        for i in 0..4 {
+            worst_realized = worst_realized.max((s.wrench[i] - t[i]).abs() / scale[i]);
+            worst_commanded = worst_commanded.max((c[i] - t[i]).abs() / scale[i]);
+        }
+    }
+    println!(
+        "worst relative error: realized {worst_realized:.2e}, commanded {worst_commanded:.2e}"
+    );
+    assert!(worst_realized < 1e-4, "{worst_realized}");
+    assert!(worst_commanded > 0.05, "{worst_commanded}");
+    // A constant command stays exactly as it was.
+    let mut steady: Vec<Sample> = (0..10)
+        .map(|k| Sample {
+            t_s: k as f64 * dt,
+            ..samples[0]
+        })
+        .collect();
+    let w0 = params.nominal_wrench([hover * 1.1, hover, hover * 0.9, hover]);
+    for s in &mut steady {
+        s.wrench = w0;
+    }
+    realize_commands(&mut steady, 500.0, 0.02, &params);
+    for s in &steady {
+        for i in 0..4 {
+            assert!((s.wrench[i] - w0[i]).abs() <= 1e-9 * w0[0].abs().max(1e-6));
+        }
+    }
+}
+
+fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hamflight-vehicle-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn rmse(r: &StudyReport, controller: &str, scenario: &str) -> Vec<f64> {
+    r.results(controller, scenario)
+        .iter()
+        .map(|f| {
+            assert!(!f.crashed, "{controller} on {scenario} crashed: {f:?}");
+            f.rmse_m.unwrap()
+        })
+        .collect()
+}
+
+fn one(r: &StudyReport, controller: &str, scenario: &str) -> f64 {
+    let v = rmse(r, controller, scenario);
+    assert_eq!(v.len(), 1, "{controller}");
+    v[0]
+}
+
+/// The study, sized for CI: eight 8 s Lee flights logged at 500 Hz (≈ 6,600 windows, near the
+/// paper's 8,640), three seeds of 12 epochs plus one trained on the commanded wrench.
+#[test]
+fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
+    let out = tmpdir("study");
+    let args = VehicleStudyArgs {
+        epochs: 12,
+        flight_s: 8.0,
+        ..VehicleStudyArgs::new(&out)
+    };
+    let r = vehicle_study::run(&args).unwrap();
+    println!("{}", vehicle_study::table(&r));
+    let [calm, windy] = r.scenarios.clone();
+
+    // Nothing crashes.
+    for f in &r.flights {
+        assert!(!f.crashed, "{f:?}");
+    }
+
+    // The import recorded the vehicle, and the training report's true values are its.
+    let m = dataset::load_manifest(&out.join("data")).unwrap();
+    assert_eq!(m.mass_kg, 0.034);
+    assert_eq!(m.vehicle.motor_tau_s, Some(0.02));
+    assert_eq!(m.vehicle.inertia_kg_m2, Some(r.vehicle.inertia_kg_m2));
+    assert_eq!(m.vehicle.rotor_efficiency, Some([1.0, 1.0, 0.9, 1.0]));
+    assert_eq!(
+        m.realizations.iter().filter(|x| x.disturbance_free).count(),
+        3
+    );
+    let m0 = dataset::load_manifest(&out.join("data-no-lag")).unwrap();
+    assert_eq!(m0.vehicle.motor_tau_s, None);
+    let rep: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("seed-0.hfw.json")).unwrap()).unwrap();
+    let tj = rep["true_inertia_kg_m2"][0][0].as_f64().unwrap();
+    assert!((tj - 1.82e-5).abs() < 1e-9, "{tj}");
+    assert!((rep["mass_kg"].as_f64().unwrap() - 0.034).abs() < 1e-6);
+    // Rotor 3 at 90 %: the true thrust gain is their mean, 0.975.
+    assert!((rep["true_gain"][2][0].as_f64().unwrap() - 0.975).abs() < 1e-5);
+
+    // Held-out N-step prediction: the learned model beats the nominal one, even with the
+    // nominal model told the true mass and inertia (it knows neither the lag nor the rotor).
+    let lagged: Vec<_> = r.seeds.iter().filter(|s| s.motor_lag_filter).collect();
+    assert_eq!(lagged.len(), 3);
+    for s in &lagged {
+        let nominal_true = s.heldout_nominal_true.unwrap();
+        assert!(
+            s.heldout_learned[3] < 0.5 * nominal_true[3],
+            "rate error: learned {:?}, nominal (true) {nominal_true:?}",
+            s.heldout_learned
+        );
+        assert!(nominal_true[3] < s.heldout_nominal_stock[3]);
+    }
+
+    // Motor dynamics: with the realized command J stays physical (measured 0.95–1.4× the true
+    // J_x, J_y over three seeds); the commanded one inflates it (5.6–6×).
+    let j_true = r.vehicle.inertia_kg_m2;
+    for s in &lagged {
+        for (k, (j, jt)) in s
+            .learned_inertia_diag_kg_m2
+            .iter()
+            .zip(j_true)
+            .take(2)
+            .enumerate()
+        {
+            let ratio = f64::from(*j) / jt;
+            assert!(
+                (0.6..1.8).contains(&ratio),
+                "seed {}: J{k} ratio {ratio}",
+                s.seed
+            );
+        }
+        let g = f64::from(s.learned_thrust_gain);
+        assert!((g - 0.975).abs() < 0.03, "seed {}: thrust gain {g}", s.seed);
+    }
+    let commanded = r.seeds.iter().find(|s| !s.motor_lag_filter).unwrap();
+    let commanded_j = commanded.learned_inertia_diag_kg_m2;
+    for (k, (j, jt)) in commanded_j.iter().zip(j_true).take(2).enumerate() {
+        let ratio = f64::from(*j) / jt;
+        assert!(ratio > 3.0, "commanded wrench: J{k} ratio {ratio}");
+    }
+
+    // Calm air: learned without adaptation within 1.5× of the nominal law given the TRUE mass
+    // and inertia, and at least 5× better than the nominal law with the stock constants.
+    let true_nominal = one(&r, "ida-pbc-true", &calm);
+    let stock_nominal = one(&r, "ida-pbc-stock", &calm);
+    for (seed, l) in rmse(&r, "learned", &calm).into_iter().enumerate() {
+        assert!(
+            l <= 1.5 * true_nominal,
+            "seed {seed}: learned {l} vs nominal (true) {true_nominal}"
+        );
+        assert!(
+            5.0 * l <= stock_nominal,
+            "seed {seed}: learned {l} vs nominal (stock) {stock_nominal}"
+        );
+    }
+
+    // paper-spiral on that vehicle: adaptive (learned) beats geometric-adaptive (nominal) for
+    // all three seeds, and is never worse than learned without adaptation.
+    let geo = one(&r, "geometric-adaptive", &windy);
+    let learned = rmse(&r, "learned", &windy);
+    for (seed, a) in rmse(&r, "adaptive", &windy).into_iter().enumerate() {
+        assert!(
+            a < geo,
+            "seed {seed}: adaptive {a} vs geometric-adaptive {geo}"
+        );
+        assert!(
+            a <= learned[seed],
+            "seed {seed}: adaptive {a} vs learned {}",
+            learned[seed]
+        );
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
