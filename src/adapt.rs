@@ -327,12 +327,19 @@ impl Adaptation {
             (lin * weight, ang * weight)
         };
         let (lin, ang) = if rates.normalized {
-            let tau = NOMINAL_TORQUE_FEATURE_NM;
             // ‖W̃‖²_F of W in nominal units (force rows / m, torque rows / τ): FEATURES for
-            // the nominal features at hover.
-            let force = features.fixed_rows::<3>(0).norm_squared() / (mass_kg * mass_kg);
-            let torque = features.fixed_rows::<3>(3).norm_squared() / (tau * tau);
-            let k = normalization(force + torque, FEATURES as f32);
+            // the nominal features at hover. One pass over the columns (column-major storage:
+            // rows 0–2 of a column are force, 3–5 torque).
+            let (mut force, mut torque) = (0.0f32, 0.0f32);
+            for &[f0, f1, f2, t0, t1, t2] in &features.data.0 {
+                force += f0 * f0 + f1 * f1 + f2 * f2;
+                torque += t0 * t0 + t1 * t1 + t2 * t2;
+            }
+            const INV_TAU2: f32 = 1.0 / (NOMINAL_TORQUE_FEATURE_NM * NOMINAL_TORQUE_FEATURE_NM);
+            let k = normalization(
+                force / (mass_kg * mass_kg) + torque * INV_TAU2,
+                FEATURES as f32,
+            );
             (lin * k, ang * k)
         } else {
             (lin, ang)

@@ -23,7 +23,7 @@ use crate::adapt::{
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
-use crate::shaping::{SetpointShaper, SHAPING_FREEZE_M};
+use crate::shaping::SetpointShaper;
 use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 
 /// Controller gains and adaptation rates.
@@ -313,7 +313,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         if self.tilt.max_rad != self.gains.max_tilt_rad {
             self.tilt = TiltLimit::new(self.gains.max_tilt_rad);
         }
-        let g = self.gains;
+        let g = &self.gains;
         let t = self.model.terms(state);
         let m = t.mass_kg;
         let r = &state.rot;
@@ -418,7 +418,7 @@ impl<M: HamiltonianModel> FlightController<M> {
                 self.adaptation
                     .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
             }
-            if !(sat.roll_pitch || sat.thrust || self.shaper.offset_norm_m() > SHAPING_FREEZE_M) {
+            if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
                 self.adaptation
                     .step(&g.rates, &t.features, &errors, m, dt_s);
             }

@@ -32,15 +32,24 @@ pub const SETTLED_M: f32 = 1e-6;
 /// tracking term is frozen: the errors then belong to a commanded transient.
 pub const SHAPING_FREEZE_M: f32 = 0.02;
 
-/// The reference model's state: the last raw setpoint and the offset δ of the shaped one.
+/// The reference model's state: the raw setpoint's own prediction of the next tick, the offset
+/// δ of the shaped setpoint, and the shaped setpoint while δ ≠ 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SetpointShaper {
-    /// The previous tick's raw position, velocity and acceleration (m, m/s, m/s²).
-    prev: Option<(Vector3<f32>, Vector3<f32>, Vector3<f32>)>,
+    /// Whether `pred_*` hold a prediction (false before the first tick and after a reset).
+    primed: bool,
+    /// δ ≠ 0 (kept as a flag: the common, inactive tick tests one bool).
+    active: bool,
+    /// The previous raw setpoint's position and velocity carried one tick ahead by its own
+    /// velocity and acceleration (m, m/s).
+    pred_p_m: Vector3<f32>,
+    pred_v_m_s: Vector3<f32>,
     /// δ (m).
     offset_m: Vector3<f32>,
     /// δ̇ (m/s).
     offset_m_s: Vector3<f32>,
+    /// The shaped setpoint of the last tick on which δ ≠ 0.
+    shaped: Setpoint,
 }
 
 impl SetpointShaper {
@@ -54,31 +63,56 @@ impl SetpointShaper {
         crate::fpu::sqrt(self.offset_m.norm_squared())
     }
 
+    /// True while ‖δ‖ > [`SHAPING_FREEZE_M`]: the gradient law's tracking term is frozen.
+    pub fn freezes_adaptation(&self) -> bool {
+        self.active && self.offset_m.norm_squared() > SHAPING_FREEZE_M * SHAPING_FREEZE_M
+    }
+
     /// True while the shaped setpoint differs from the raw one.
     pub fn is_active(&self) -> bool {
-        self.offset_m != Vector3::zeros() || self.offset_m_s != Vector3::zeros()
+        self.active
     }
 
     /// The shaped setpoint for this tick of `dt_s` (s), with the reference model's natural
     /// frequency `omega_rad_s` (rad/s; 0 or less, or non-finite, turns shaping off).
     pub fn shape(&mut self, sp: &Setpoint, dt_s: f32, omega_rad_s: f32) -> Setpoint {
-        if !(omega_rad_s > 0.0 && omega_rad_s.is_finite()) {
-            self.reset();
-            return *sp;
+        if self.update(sp, dt_s, omega_rad_s) {
+            self.shaped
+        } else {
+            *sp
         }
-        if let Some((p, v, a)) = self.prev {
-            let jump_p = sp.p_m - (p + v * dt_s + a * (0.5 * dt_s * dt_s));
+    }
+
+    /// One tick of the reference model. Returns true if the setpoint is shaped this tick: it is
+    /// then [`SetpointShaper::shaped`]; false means `sp` passes unchanged (the common case, with
+    /// no copy on the control path).
+    pub fn update(&mut self, sp: &Setpoint, dt_s: f32, omega_rad_s: f32) -> bool {
+        if !(omega_rad_s > 0.0 && omega_rad_s.is_finite()) {
+            if self.primed {
+                self.reset();
+            }
+            return false;
+        }
+        if self.primed {
+            let jump_p = sp.p_m - self.pred_p_m;
             if jump_p.norm_squared() > JUMP_POSITION_M * JUMP_POSITION_M {
                 self.offset_m -= jump_p;
+                self.active = true;
             }
-            let jump_v = sp.v_m_s - (v + a * dt_s);
+            let jump_v = sp.v_m_s - self.pred_v_m_s;
             if jump_v.norm_squared() > JUMP_VELOCITY_M_S * JUMP_VELOCITY_M_S {
                 self.offset_m_s -= jump_v;
+                self.active = true;
             }
         }
-        self.prev = Some((sp.p_m, sp.v_m_s, sp.a_m_s2));
-        if !self.is_active() {
-            return *sp;
+        // The next tick is assumed as long as this one: a jitter of the tick moves the
+        // prediction by v·Δt, far below the jump thresholds.
+        let a_dt = sp.a_m_s2 * dt_s;
+        self.pred_v_m_s = sp.v_m_s + a_dt;
+        self.pred_p_m = sp.p_m + (sp.v_m_s + a_dt * 0.5) * dt_s;
+        self.primed = true;
+        if !self.active {
+            return false;
         }
         let (w2, two_w) = (omega_rad_s * omega_rad_s, 2.0 * omega_rad_s);
         let acc = -(self.offset_m * w2) - self.offset_m_s * two_w;
@@ -87,12 +121,12 @@ impl SetpointShaper {
         let next_p = self.offset_m + next_v * dt_s;
         if !(next_p.iter().chain(next_v.iter()).all(|x| x.is_finite())) {
             self.reset();
-            return *sp;
+            return false;
         }
         self.offset_m_s = next_v;
         self.offset_m = next_p;
         let jerk = -(self.offset_m_s * w2) - acc * two_w;
-        let shaped = Setpoint {
+        self.shaped = Setpoint {
             p_m: sp.p_m + self.offset_m,
             v_m_s: sp.v_m_s + self.offset_m_s,
             a_m_s2: sp.a_m_s2 + acc,
@@ -104,8 +138,14 @@ impl SetpointShaper {
         {
             self.offset_m = Vector3::zeros();
             self.offset_m_s = Vector3::zeros();
+            self.active = false;
         }
-        shaped
+        true
+    }
+
+    /// The shaped setpoint of the last [`SetpointShaper::update`] that returned true.
+    pub fn shaped(&self) -> &Setpoint {
+        &self.shaped
     }
 }
 
