@@ -23,10 +23,17 @@
 //!   a disturbance.
 //! - what does tell them apart is the **prediction error** of the composite law below: during a
 //!   transient the model predicts the measured force, so ε ≈ 0 and a stays put. With it `step`
-//!   holds 0.016 cm, with or without the clipping. That is the modification that answers
-//!   windup (`adaptive-composite`); it is not the default law because it does not win
-//!   everywhere (see `motor_tau_s` and [`crate::control::Gains`]), and the clipping stays
-//!   available for the gradient law.
+//!   holds 0.023 cm (`adaptive-composite`); it is not the default law because it does not win
+//!   everywhere (see `motor_tau_s` and [`crate::control::Gains`]).
+//! - for the default (gradient) law, the answer is at the source of the transient: the
+//!   **setpoint shaping** of [`crate::shaping`] (a reference model, as model-reference adaptive
+//!   control has it) turns a setpoint jump into a motion the vehicle can fly, and the tracking
+//!   term is frozen while the shaped setpoint is more than 2 cm from the raw one. `step`: 0.51 →
+//!   0.030 cm; smooth trajectories are untouched (paper-spiral 0.0355 cm, bit for bit).
+//! - and the **normalized gradient** ([`AdaptationRates::normalized`], default on): the law's
+//!   loop gain grows as ‖W‖², so features far larger than nominal (a badly scaled trained model,
+//!   or the ×5 of the wrong-features test) made it unstable (paper-spiral crashed at 1.3 s).
+//!   Dividing ȧ by max(1, ‖W̃‖² / (2p)) keeps the rates' meaning for every trained model.
 //!
 //! **Composite law (Slotine and Li's composite adaptation; Neural-Fly's Kalman-style gain):**
 //! a is also driven by the model's prediction error, the measured generalized force minus what
@@ -58,7 +65,7 @@
 //! (so the two laws differ only by the prediction term) and check the loop in SITL.
 
 use crate::mixer::Wrench;
-use crate::model::FEATURES;
+use crate::model::{FEATURES, NOMINAL_TORQUE_FEATURE_NM};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3, Vector4, Vector6};
 
 /// The torque unit a reads in (N·m per unit of a): the features' torque columns are scaled so.
@@ -87,6 +94,14 @@ pub struct AdaptationRates {
     /// the law all but stops while the vehicle is far from the reference (a transient, not a
     /// disturbance) and runs at full rate near it.
     pub soft_freeze_m: f32,
+    /// Normalized gradient (issue 10 item 4, issue 11 item 3): ȧ is divided by
+    /// max(1, ‖W̃‖²_F / (h p)), where W̃ is W in nominal units (force rows divided by m, torque
+    /// rows by [`NOMINAL_TORQUE_FEATURE_NM`]), p = FEATURES is ‖W̃‖²_F of the nominal features
+    /// and h = [`NORMALIZATION_HEADROOM`]. The rates are tuned in nominal feature units; the
+    /// loop gain of the paper's law grows as ‖W‖², so with it the same rates hold for any
+    /// trained model whatever the scale of its features. A scalar factor keeps the law's
+    /// direction Wᵀ s (the normalized gradient law of adaptive control).
+    pub normalized: bool,
 }
 
 impl AdaptationRates {
@@ -96,6 +111,7 @@ impl AdaptationRates {
             drive_max_m: f32::INFINITY,
             drive_max_rad: f32::INFINITY,
             soft_freeze_m: f32::INFINITY,
+            normalized: false,
             ..self
         }
     }
@@ -249,6 +265,22 @@ fn clip(v: &Vector3<f32>, max: f32) -> Vector3<f32> {
     }
 }
 
+/// Headroom of the normalization: features up to this many times the nominal ones' squared
+/// norm keep the full rate (a trained model's features are near nominal at hover and grow with
+/// tilt; the shipped model's reach ~1.1× on paper-spiral).
+pub const NORMALIZATION_HEADROOM: f32 = 2.0;
+
+/// min(1, headroom / (`norm2` / `reference2`)): the normalized gradient's factor; 1 for a
+/// non-positive or non-finite reference or norm (nothing to normalize against).
+fn normalization(norm2: f32, reference2: f32) -> f32 {
+    let ratio = norm2 / (reference2 * NORMALIZATION_HEADROOM);
+    if ratio > 1.0 && ratio.is_finite() {
+        1.0 / ratio
+    } else {
+        1.0
+    }
+}
+
 fn finite<const R: usize, const C: usize>(m: &SMatrix<f32, R, C>) -> bool {
     m.iter().all(|x| x.is_finite())
 }
@@ -264,11 +296,13 @@ impl Adaptation {
         self.pred.has_prev = false;
     }
 
-    /// ȧ of the gradient law for the given features and errors, with the robust clipping.
+    /// ȧ of the gradient law for the given features and errors, with the robust clipping and
+    /// the normalization ([`AdaptationRates::normalized`]) for a vehicle of `mass_kg`.
     pub fn rate(
         rates: &AdaptationRates,
         features: &SMatrix<f32, 6, FEATURES>,
         err: &TrackingError,
+        mass_kg: f32,
     ) -> SVector<f32, FEATURES> {
         let lin = err.e_p * rates.c_p + err.e_v * rates.c_v;
         let ang = err.e_r * rates.c_r + err.e_w * rates.c_w;
@@ -292,6 +326,24 @@ impl Adaptation {
         } else {
             (lin * weight, ang * weight)
         };
+        let (lin, ang) = if rates.normalized {
+            // ‖W̃‖²_F of W in nominal units (force rows / m, torque rows / τ): FEATURES for
+            // the nominal features at hover. One pass over the columns (column-major storage:
+            // rows 0–2 of a column are force, 3–5 torque).
+            let (mut force, mut torque) = (0.0f32, 0.0f32);
+            for &[f0, f1, f2, t0, t1, t2] in &features.data.0 {
+                force += f0 * f0 + f1 * f1 + f2 * f2;
+                torque += t0 * t0 + t1 * t1 + t2 * t2;
+            }
+            const INV_TAU2: f32 = 1.0 / (NOMINAL_TORQUE_FEATURE_NM * NOMINAL_TORQUE_FEATURE_NM);
+            let k = normalization(
+                force / (mass_kg * mass_kg) + torque * INV_TAU2,
+                FEATURES as f32,
+            );
+            (lin * k, ang * k)
+        } else {
+            (lin, ang)
+        };
         let s = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
         features.transpose() * s
     }
@@ -303,9 +355,10 @@ impl Adaptation {
         rates: &AdaptationRates,
         features: &SMatrix<f32, 6, FEATURES>,
         err: &TrackingError,
+        mass_kg: f32,
         dt_s: f32,
     ) {
-        let next = self.a + Self::rate(rates, features, err) * dt_s;
+        let next = self.a + Self::rate(rates, features, err, mass_kg) * dt_s;
         self.set_projected(next, rates.a_max);
     }
 

@@ -73,10 +73,10 @@ impl core::fmt::Display for BlobError {
             Self::TrailingBytes => f.write_str("weight blob has bytes after its checksum"),
             Self::Malformed => f.write_str("weight blob body is malformed"),
             Self::NonFinite => f.write_str("weight blob holds a NaN or infinite parameter"),
-            Self::BadMass => write!(
-                f,
-                "weight blob vehicle mass is outside {MIN_MASS_KG}..={MAX_MASS_KG} kg"
-            ),
+            // A literal, not the constants: formatting an f32 would pull ~10 KB of float
+            // printing into every firmware that shows this error (blob_error_text_names_the_range
+            // checks the text against MIN_MASS_KG and MAX_MASS_KG).
+            Self::BadMass => f.write_str("weight blob vehicle mass is outside 0.005..=5 kg"),
         }
     }
 }

@@ -23,6 +23,7 @@ use crate::adapt::{
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
+use crate::shaping::SetpointShaper;
 use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 
 /// Controller gains and adaptation rates.
@@ -67,6 +68,9 @@ pub struct Gains {
     pub law: AdaptationLaw,
     /// Tuning of the composite law's prediction term.
     pub composite: CompositeGains,
+    /// Natural frequency ω (rad/s) of the reference model that shapes setpoint jumps
+    /// ([`crate::shaping`]); 0 turns it off. Smooth trajectories pass unchanged.
+    pub shaping_omega_rad_s: f32,
 }
 
 impl Default for Gains {
@@ -97,10 +101,12 @@ impl Gains {
                 drive_max_m: f32::INFINITY,
                 drive_max_rad: f32::INFINITY,
                 soft_freeze_m: f32::INFINITY,
+                normalized: true,
             },
             adapt: true,
             law: AdaptationLaw::Gradient,
             composite: CompositeGains::default(),
+            shaping_omega_rad_s: 3.0,
         }
     }
 
@@ -123,10 +129,12 @@ impl Gains {
                 drive_max_m: f32::INFINITY,
                 drive_max_rad: f32::INFINITY,
                 soft_freeze_m: f32::INFINITY,
+                normalized: false,
             },
             adapt: true,
             law: AdaptationLaw::Gradient,
             composite: CompositeGains::default(),
+            shaping_omega_rad_s: 0.0,
         }
     }
 }
@@ -216,6 +224,8 @@ pub struct FlightController<M> {
     comp_rate_n_s: Vector3<f32>,
     /// `gains.max_tilt_rad` with its cosine and sine, refreshed when the gain changes.
     tilt: TiltLimit,
+    /// The reference model that shapes setpoint jumps.
+    shaper: SetpointShaper,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
@@ -229,6 +239,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             comp_prev_n: None,
             comp_rate_n_s: Vector3::zeros(),
             tilt: TiltLimit::new(gains.max_tilt_rad),
+            shaper: SetpointShaper::default(),
         }
     }
 
@@ -245,12 +256,14 @@ impl<M: HamiltonianModel> FlightController<M> {
     /// Resets the adaptation (a = 0).
     pub fn reset(&mut self) {
         self.adaptation.reset();
+        self.shaper.reset();
         self.comp_prev_n = None;
         self.comp_rate_n_s = Vector3::zeros();
     }
 
     fn safe(&mut self, faults: Faults) -> Output {
         self.comp_prev_n = None;
+        self.shaper.reset();
         // The next good tick does not follow this one by one interval, and nothing was delivered.
         self.adaptation.break_sequence();
         self.adaptation.record_input(&Wrench::default());
@@ -295,10 +308,12 @@ impl<M: HamiltonianModel> FlightController<M> {
         if faults.is_fault() {
             return self.safe(faults);
         }
+        let shaped = self.shaper.shape(sp, dt_s, self.gains.shaping_omega_rad_s);
+        let sp = &shaped;
         if self.tilt.max_rad != self.gains.max_tilt_rad {
             self.tilt = TiltLimit::new(self.gains.max_tilt_rad);
         }
-        let g = self.gains;
+        let g = &self.gains;
         let t = self.model.terms(state);
         let m = t.mass_kg;
         let r = &state.rot;
@@ -403,8 +418,9 @@ impl<M: HamiltonianModel> FlightController<M> {
                 self.adaptation
                     .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
             }
-            if !(sat.roll_pitch || sat.thrust) {
-                self.adaptation.step(&g.rates, &t.features, &errors, dt_s);
+            if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
+                self.adaptation
+                    .step(&g.rates, &t.features, &errors, m, dt_s);
             }
             #[cfg(feature = "composite")]
             self.adaptation

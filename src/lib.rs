@@ -30,6 +30,7 @@ pub mod mixer;
 pub mod model;
 pub mod nn;
 pub mod reference;
+pub mod shaping;
 
 pub use adapt::{AdaptationLaw, Measurement};
 pub use control::{is_rotation, Faults, FlightController, Gains, Output, ROTATION_TOLERANCE};

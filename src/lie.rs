@@ -120,6 +120,84 @@ pub fn orthonormalize(r: &Matrix3<f32>) -> Option<Matrix3<f32>> {
     Some(Matrix3::from_columns(&[x, y, z]))
 }
 
+/// The attitude matrix of the quaternion `q = [w, x, y, z]` (Hamilton convention, scalar first,
+/// body → world like R), in the homogeneous form
+/// R = (w² − |u|²) I + 2 u uᵀ + 2 w [u]×, with u = (x, y, z).
+///
+/// This is the one place where a quaternion becomes the core's R (the firmware's link carries the
+/// attitude as one). It does not normalize: for |q| = 1 + ε the result is (1 + ε)² times a
+/// rotation, so RᵀR = |q|⁴ I and ‖RᵀR − I‖_F = √3 (|q|⁴ − 1) ≈ 4√3 ε, which the controller's
+/// rotation check ([`crate::control::is_rotation`], [`crate::ROTATION_TOLERANCE`] = 1e-3) refuses
+/// beyond |ε| ≈ 1.4e-4. A non-finite q gives a non-finite R, refused by the same check. So a
+/// malformed quaternion is a `bad_state` (motors off), never a panic and never silently repaired.
+pub fn rot_from_quat(q: &[f32; 4]) -> Matrix3<f32> {
+    let [w, x, y, z] = *q;
+    let (ww, xx, yy, zz) = (w * w, x * x, y * y, z * z);
+    let (xy, xz, yz) = (x * y, x * z, y * z);
+    let (wx, wy, wz) = (w * x, w * y, w * z);
+    Matrix3::new(
+        ww + xx - yy - zz,
+        2.0 * (xy - wz),
+        2.0 * (xz + wy),
+        2.0 * (xy + wz),
+        ww - xx + yy - zz,
+        2.0 * (yz - wx),
+        2.0 * (xz - wy),
+        2.0 * (yz + wx),
+        ww - xx - yy + zz,
+    )
+}
+
+/// The unit quaternion `[w, x, y, z]` (w ≥ 0) of the rotation `r`, the inverse of
+/// [`rot_from_quat`] on rotations: Shepperd's method (the largest of w, x, y, z is taken from the
+/// diagonal, the others from sums and differences, so every branch divides by at least ½), then
+/// normalized to the f32 unit sphere.
+///
+/// For senders of a quaternion (the link's host end). `r` should be a rotation (check it with
+/// [`crate::control::is_rotation`]): any other finite matrix gives a finite quaternion of another
+/// attitude, a non-finite one gives a non-finite quaternion (refused at the receiver).
+pub fn quat_from_rot(r: &Matrix3<f32>) -> [f32; 4] {
+    let tr = r.m11 + r.m22 + r.m33;
+    let q = if tr >= r.m11 && tr >= r.m22 && tr >= r.m33 {
+        // 4w² = 1 + tr is the largest.
+        let s = 2.0 * libm::sqrtf((1.0 + tr).max(0.0));
+        [
+            0.25 * s,
+            (r.m32 - r.m23) / s,
+            (r.m13 - r.m31) / s,
+            (r.m21 - r.m12) / s,
+        ]
+    } else if r.m11 >= r.m22 && r.m11 >= r.m33 {
+        let s = 2.0 * libm::sqrtf((1.0 + r.m11 - r.m22 - r.m33).max(0.0));
+        [
+            (r.m32 - r.m23) / s,
+            0.25 * s,
+            (r.m12 + r.m21) / s,
+            (r.m13 + r.m31) / s,
+        ]
+    } else if r.m22 >= r.m33 {
+        let s = 2.0 * libm::sqrtf((1.0 + r.m22 - r.m11 - r.m33).max(0.0));
+        [
+            (r.m13 - r.m31) / s,
+            (r.m12 + r.m21) / s,
+            0.25 * s,
+            (r.m23 + r.m32) / s,
+        ]
+    } else {
+        let s = 2.0 * libm::sqrtf((1.0 + r.m33 - r.m11 - r.m22).max(0.0));
+        [
+            (r.m21 - r.m12) / s,
+            (r.m13 + r.m31) / s,
+            (r.m23 + r.m32) / s,
+            0.25 * s,
+        ]
+    };
+    let n = libm::sqrtf(q.iter().map(|c| c * c).sum::<f32>());
+    // q and −q are the same attitude: the wire form has w ≥ 0.
+    let k = if q[0] < 0.0 { -1.0 / n } else { 1.0 / n };
+    q.map(|c| c * k)
+}
+
 /// The paper's rotation error e_R = ½ (R*ᵀ R − Rᵀ R*)^∨ (body frame; `r_des` is R*).
 /// Equals `sin θ · axis` of the error rotation R*ᵀ R for small errors.
 #[inline]
@@ -149,6 +227,46 @@ mod tests {
             assert!((phi.norm() - core::f32::consts::PI).abs() < 1e-5);
             assert!((phi.normalize().dot(&axis)).abs() > 1.0 - 1e-5);
         }
+    }
+
+    #[test]
+    fn quaternion_round_trip_and_norm_check() {
+        use crate::control::is_rotation;
+        // Near the identity, near half turns about each axis (every Shepperd branch), and generic.
+        let mut phis = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1e-4, -2e-4, 3e-4),
+            Vector3::new(0.3, -1.2, 2.0),
+            Vector3::new(-2.5, 0.4, 1.0),
+        ]
+        .to_vec();
+        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            phis.push(axis * (core::f32::consts::PI - 1e-3));
+            phis.push(axis * core::f32::consts::PI);
+        }
+        for phi in phis {
+            let r = exp(&phi);
+            let q = quat_from_rot(&r);
+            let n2: f32 = q.iter().map(|c| c * c).sum();
+            assert!((n2 - 1.0).abs() < 1e-6, "{q:?}");
+            assert!(q[0] >= 0.0);
+            let back = rot_from_quat(&q);
+            assert!((back - r).norm() < 2e-6, "{phi:?}: {back} vs {r}");
+            assert!(is_rotation(&back));
+        }
+        // Off unit norm by ε: accepted within the documented ≈ 1.4e-4, refused beyond.
+        let q = quat_from_rot(&exp(&Vector3::new(0.3, -1.2, 2.0)));
+        assert!(is_rotation(&rot_from_quat(&q.map(|c| c * (1.0 + 1e-4)))));
+        assert!(!is_rotation(&rot_from_quat(&q.map(|c| c * (1.0 + 2e-4)))));
+        assert!(!is_rotation(&rot_from_quat(&q.map(|c| c * 0.5))));
+        assert!(!is_rotation(&rot_from_quat(&[0.0; 4])));
+        for bad in [f32::NAN, f32::INFINITY] {
+            assert!(!is_rotation(&rot_from_quat(&[bad, 0.0, 0.0, 0.0])));
+            assert!(!is_rotation(&rot_from_quat(&[1.0, 0.0, bad, 0.0])));
+        }
+        assert!(quat_from_rot(&Matrix3::from_element(f32::NAN))
+            .iter()
+            .all(|c| !c.is_finite()));
     }
 
     #[test]

@@ -4,19 +4,34 @@ use nalgebra::Vector3;
 
 /// A flat-output setpoint: desired position and its derivatives up to jerk (world frame), and the
 /// desired yaw. What a trajectory generator or a companion computer sends each tick.
+///
+/// With the `serde` feature this one type is also the setpoint of the firmware's link (postcard:
+/// 14 f32, 56 bytes, no names) and of the bridge's JSON lines, under the bridge's documented names
+/// `p`, `v`, `a`, `j`, `yaw`, `yaw_rate` (all but `p` default to zero; unknown names are errors).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(deny_unknown_fields)
+)]
 pub struct Setpoint {
     /// Desired position p* (m, world).
+    #[cfg_attr(feature = "serde", serde(rename = "p"))]
     pub p_m: Vector3<f32>,
     /// Desired velocity ṗ* (m/s, world).
+    #[cfg_attr(feature = "serde", serde(rename = "v", default))]
     pub v_m_s: Vector3<f32>,
     /// Desired acceleration p̈* (m/s², world).
+    #[cfg_attr(feature = "serde", serde(rename = "a", default))]
     pub a_m_s2: Vector3<f32>,
     /// Desired jerk p⃛* (m/s³, world).
+    #[cfg_attr(feature = "serde", serde(rename = "j", default))]
     pub j_m_s3: Vector3<f32>,
     /// Desired yaw ψ* (rad), about world z.
+    #[cfg_attr(feature = "serde", serde(rename = "yaw", default))]
     pub yaw_rad: f32,
     /// Desired yaw rate ψ̇* (rad/s).
+    #[cfg_attr(feature = "serde", serde(rename = "yaw_rate", default))]
     pub yaw_rate_rad_s: f32,
 }
 

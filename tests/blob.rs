@@ -650,3 +650,12 @@ proptest! {
         prop_assert!(decode(&with_header).is_err());
     }
 }
+
+#[test]
+fn blob_error_text_names_the_range() {
+    let text = BlobError::BadMass.to_string();
+    assert!(
+        text.contains(&format!("{MIN_MASS_KG}..={MAX_MASS_KG} kg")),
+        "{text}"
+    );
+}

@@ -8,6 +8,10 @@
 //! fresh input the motors hold their last command until the watchdog runs out: no valid state
 //! for [`WATCHDOG_MS`] stops them. The next valid state resumes control (the adaptation estimate
 //! is kept).
+//!
+//! The setpoint is held: an input without one ([`Input::setpoint`] `None`) flies the last one
+//! received. Until there is one (at boot, and after a watchdog trip, which forgets it) an input
+//! counts as no input.
 
 use crate::link::{Input, LinkStatus, ModelKind, Report, Telemetry};
 use crate::motor::{rpm_to_pwm, Motors};
@@ -169,6 +173,8 @@ pub enum TickOutcome {
 pub struct ControlLoop<M> {
     controller: Result<FlightController<M>, BlobError>,
     latest: Option<Input>,
+    /// The last setpoint received; `None` at boot and after a watchdog trip.
+    setpoint: Option<Setpoint>,
     /// Ticks since the controller last used a state (a step without fault), counting the
     /// current one; `None` before the first and after a watchdog trip.
     ticks_since_used: Option<u32>,
@@ -213,6 +219,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
                 FlightController::new(m, gains)
             }),
             latest: None,
+            setpoint: None,
             ticks_since_used: None,
             last_used_seq: 0,
             watchdog: Watchdog::new(WATCHDOG_TICKS),
@@ -261,11 +268,16 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             }
         };
         self.ticks_since_used = self.ticks_since_used.map(|n| n.saturating_add(1));
-        let Some(input) = self.latest.take() else {
+        let latest = self.latest.take();
+        if let Some(sp) = latest.and_then(|i| i.setpoint) {
+            self.setpoint = Some(sp);
+        }
+        let (Some(input), Some(setpoint)) = (latest, self.setpoint) else {
             if self.watchdog.starve() {
                 motors.off();
                 self.status = LinkStatus::WatchdogTripped;
                 self.ticks_since_used = None;
+                self.setpoint = None;
                 return TickOutcome::Stopped(self.status);
             }
             if self.watchdog.tripped() || self.status == LinkStatus::WaitingForState {
@@ -280,7 +292,6 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         );
         let start = cost.now();
         let state = State::from(&input.state);
-        let setpoint = Setpoint::from(&input.setpoint);
         let meas = hamflight::Measurement {
             acc_body_m_s2: input.state.acc.map(nalgebra::Vector3::from),
         };
@@ -301,6 +312,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
             if self.watchdog.starve() {
                 self.status = LinkStatus::WatchdogTripped;
                 self.ticks_since_used = None;
+                self.setpoint = None;
             }
         } else {
             self.watchdog.feed();

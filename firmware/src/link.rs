@@ -11,13 +11,22 @@
 //! A frame that fails COBS, the CRC or postcard is counted and dropped ([`FrameError`]); the
 //! decoder resynchronises at the next zero byte.
 //!
+//! Sizes (postcard: f32 as 4 bytes, integers as varints, COBS 1 byte under 254; checked by the
+//! firmware's host test `frame_sizes_fit_the_baud_budget`), delimiter included: an [`Input`] with
+//! its setpoint is 120 bytes while the sequence number is below 2²¹ (35 min at 1 kHz; 122 at
+//! most): 1 tag + 3 seq + 53 state + 57 setpoint, 4 CRC, 1 COBS, 1 delimiter. Without its
+//! setpoint (the firmware keeps the last one) 64 (66); with an accelerometer 12 more. A
+//! [`Telemetry`] is 84 bytes in flight, 98 at most. At 10 bits per byte (8N1) a UART carries
+//! baud / 10 000 bytes per ms each way: the README's performance section has the budget at 500 Hz
+//! and 1 kHz.
+//!
 //! This file is also compiled into the host's processor-in-the-loop test
 //! (`host-train/tests/pil_qemu.rs` includes it with `#[path]`), so both ends encode and decode
 //! exactly the same bytes. It therefore depends only on `core`, `serde`, `postcard`, `cobs`
 //! (postcard's own COBS crate), `nalgebra` and `hamflight`.
 
 use hamflight::{Faults, Output, Setpoint, State};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Largest encoded frame (COBS overhead, CRC and delimiter included).
@@ -25,13 +34,22 @@ pub const MAX_FRAME: usize = 256;
 /// Largest postcard payload of one message.
 pub const MAX_PAYLOAD: usize = MAX_FRAME - 8;
 
-/// The vehicle state on the wire (f32, SI units, the core's conventions).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// The vehicle state on the wire (f32, SI units, the core's conventions): 52 bytes, plus the
+/// accelerometer's 1 or 13.
+///
+/// A second form of the core's [`State`], kept on purpose: the wire carries the attitude as a
+/// unit quaternion (4 floats) where the core's law works on R (9), which keeps the frame small
+/// enough for a 1 kHz loop (see the module doc). The conversions are the two `From`s below, the
+/// quaternion ↔ R steps [`hamflight::lie::quat_from_rot`] and [`hamflight::lie::rot_from_quat`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireState {
     /// Position p (m, world).
     pub p: [f32; 3],
-    /// Attitude R (body → world), row-major.
-    pub rot: [f32; 9],
+    /// Attitude: the unit quaternion `[w, x, y, z]` of R (body → world, Hamilton, w ≥ 0 as sent).
+    /// Not normalized on receipt: a norm off 1 by more than ≈ 1.4e-4, or a non-finite
+    /// component, fails the controller's rotation check (`hamflight::ROTATION_TOLERANCE`, see
+    /// [`hamflight::lie::rot_from_quat`]) and the step is a `bad_state` with the motors off.
+    pub q: [f32; 4],
     /// Linear velocity v (m/s, body frame).
     pub v: [f32; 3],
     /// Angular velocity ω (rad/s, body frame).
@@ -42,21 +60,11 @@ pub struct WireState {
     pub acc: Option<[f32; 3]>,
 }
 
-/// The setpoint on the wire: flat outputs up to jerk (world frame) and yaw.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct WireSetpoint {
-    /// p* (m).
-    pub p: [f32; 3],
-    /// ṗ* (m/s).
-    pub v: [f32; 3],
-    /// p̈* (m/s²).
-    pub a: [f32; 3],
-    /// p⃛* (m/s³).
-    pub j: [f32; 3],
-    /// ψ* (rad).
-    pub yaw: f32,
-    /// ψ̇* (rad/s).
-    pub yaw_rate: f32,
+impl Default for WireState {
+    /// At rest at the origin, level.
+    fn default() -> Self {
+        Self::from(&State::default())
+    }
 }
 
 /// One control input: the latest state estimate and the setpoint to track.
@@ -69,8 +77,11 @@ pub struct Input {
     pub seq: u32,
     /// State estimate.
     pub state: WireState,
-    /// Setpoint.
-    pub setpoint: WireSetpoint,
+    /// The setpoint (the core's own type, 56 bytes), or `None` (1 byte) to keep flying the last
+    /// one received. A sender may send it only when it changes, and must send it again after a
+    /// [`LinkStatus::WatchdogTripped`] (the trip forgets it) and before the first state counts:
+    /// until the firmware has a setpoint, inputs do not step the controller.
+    pub setpoint: Option<Setpoint>,
 }
 
 /// Host (companion computer, motion capture, PIL test) → firmware.
@@ -87,7 +98,7 @@ pub enum Uplink {
 /// Why the motors are off (or `Running`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum LinkStatus {
-    /// No valid state has arrived yet.
+    /// No valid state, or no setpoint, has arrived yet (or since the watchdog tripped).
     WaitingForState,
     /// The controller is flying on fresh input.
     Running,
@@ -256,14 +267,13 @@ pub enum Downlink {
     Report(Report),
 }
 
+/// The sender's side: R → its unit quaternion ([`hamflight::lie::quat_from_rot`]); no
+/// accelerometer.
 impl From<&State> for WireState {
     fn from(s: &State) -> Self {
-        let r = &s.rot;
         Self {
             p: s.p_m.into(),
-            rot: [
-                r.m11, r.m12, r.m13, r.m21, r.m22, r.m23, r.m31, r.m32, r.m33,
-            ],
+            q: hamflight::lie::quat_from_rot(&s.rot),
             v: s.v_body_m_s.into(),
             w: s.w_body_rad_s.into(),
             acc: None,
@@ -271,39 +281,15 @@ impl From<&State> for WireState {
     }
 }
 
+/// The receiver's side: the quaternion → R ([`hamflight::lie::rot_from_quat`], unnormalized, so
+/// that the controller's rotation check sees a malformed quaternion).
 impl From<&WireState> for State {
     fn from(s: &WireState) -> Self {
         Self {
             p_m: Vector3::from(s.p),
-            rot: Matrix3::from_row_slice(&s.rot),
+            rot: hamflight::lie::rot_from_quat(&s.q),
             v_body_m_s: Vector3::from(s.v),
             w_body_rad_s: Vector3::from(s.w),
-        }
-    }
-}
-
-impl From<&Setpoint> for WireSetpoint {
-    fn from(s: &Setpoint) -> Self {
-        Self {
-            p: s.p_m.into(),
-            v: s.v_m_s.into(),
-            a: s.a_m_s2.into(),
-            j: s.j_m_s3.into(),
-            yaw: s.yaw_rad,
-            yaw_rate: s.yaw_rate_rad_s,
-        }
-    }
-}
-
-impl From<&WireSetpoint> for Setpoint {
-    fn from(s: &WireSetpoint) -> Self {
-        Self {
-            p_m: Vector3::from(s.p),
-            v_m_s: Vector3::from(s.v),
-            a_m_s2: Vector3::from(s.a),
-            j_m_s3: Vector3::from(s.j),
-            yaw_rad: s.yaw,
-            yaw_rate_rad_s: s.yaw_rate,
         }
     }
 }

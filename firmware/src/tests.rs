@@ -1,9 +1,7 @@
 //! Host unit tests of the chip-independent parts.
 
 use crate::control_loop::{ControlLoop, NoCost, TickOutcome, WATCHDOG_TICKS};
-use crate::link::{
-    self, Downlink, FrameDecoder, FrameError, Input, Telemetry, Uplink, WireSetpoint, WireState,
-};
+use crate::link::{self, Downlink, FrameDecoder, FrameError, Input, Telemetry, Uplink, WireState};
 use crate::motor::{pwm_to_rpm, rpm_to_pwm, Motors};
 use core::convert::Infallible;
 use embedded_hal::pwm::{ErrorType, SetDutyCycle};
@@ -43,7 +41,7 @@ fn hover_input(seq: u32) -> Input {
             p_m: p,
             ..State::default()
         }),
-        setpoint: WireSetpoint::from(&Setpoint::hover(p, 0.0)),
+        setpoint: Some(Setpoint::hover(p, 0.0)),
     }
 }
 
@@ -195,6 +193,30 @@ impl SplitMix64 {
     fn f32s<const N: usize>(&mut self) -> [f32; N] {
         core::array::from_fn(|_| self.f32())
     }
+    /// A wire quaternion: a unit one (as a sender makes it), one off unit norm by up to ±1e-3,
+    /// any finite bits, or one with a NaN or infinite component.
+    fn quat(&mut self) -> [f32; 4] {
+        let unit = hamflight::lie::quat_from_rot(&hamflight::lie::exp(&Vector3::new(
+            self.below(2001) as f32 * 3e-3 - 3.0,
+            self.below(2001) as f32 * 3e-3 - 3.0,
+            self.below(2001) as f32 * 3e-3 - 3.0,
+        )));
+        match self.below(5) {
+            0 | 1 => unit,
+            2 => {
+                let k = 1.0 + (self.below(2001) as f32 - 1000.0) * 1e-6;
+                unit.map(|c| c * k)
+            }
+            3 => self.f32s(),
+            _ => {
+                let mut q = unit;
+                if let Some(c) = q.get_mut(self.below(4)) {
+                    *c = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][self.below(3)];
+                }
+                q
+            }
+        }
+    }
 }
 
 fn random_uplink(rng: &mut SplitMix64) -> Uplink {
@@ -205,7 +227,7 @@ fn random_uplink(rng: &mut SplitMix64) -> Uplink {
             seq: rng.next_u64() as u32,
             state: WireState {
                 p: rng.f32s(),
-                rot: rng.f32s(),
+                q: rng.quat(),
                 v: rng.f32s(),
                 w: rng.f32s(),
                 acc: if rng.below(2) == 0 {
@@ -214,13 +236,17 @@ fn random_uplink(rng: &mut SplitMix64) -> Uplink {
                     Some(rng.f32s())
                 },
             },
-            setpoint: WireSetpoint {
-                p: rng.f32s(),
-                v: rng.f32s(),
-                a: rng.f32s(),
-                j: rng.f32s(),
-                yaw: rng.f32(),
-                yaw_rate: rng.f32(),
+            setpoint: if rng.below(3) == 0 {
+                None
+            } else {
+                Some(Setpoint {
+                    p_m: rng.f32s().into(),
+                    v_m_s: rng.f32s().into(),
+                    a_m_s2: rng.f32s().into(),
+                    j_m_s3: rng.f32s().into(),
+                    yaw_rad: rng.f32(),
+                    yaw_rate_rad_s: rng.f32(),
+                })
             },
         }),
     }
@@ -506,7 +532,19 @@ fn wire_state_round_trips() {
         v_body_m_s: Vector3::new(0.1, 0.2, 0.3),
         w_body_rad_s: Vector3::new(-1.0, 0.5, 2.0),
     };
-    assert_eq!(State::from(&WireState::from(&s)), s);
+    let back = State::from(&WireState::from(&s));
+    assert_eq!(
+        (back.p_m, back.v_body_m_s, back.w_body_rad_s),
+        (s.p_m, s.v_body_m_s, s.w_body_rad_s)
+    );
+    // The attitude goes through its unit quaternion: equal to f32 rounding, still a rotation.
+    assert!(
+        (back.rot - s.rot).norm() < 1e-6,
+        "{} vs {}",
+        back.rot,
+        s.rot
+    );
+    assert!(hamflight::is_rotation(&back.rot));
 }
 
 /// An input off the hover point (position, velocity and attitude errors), so that the
@@ -522,7 +560,7 @@ fn off_input(seq: u32) -> Input {
             v_body_m_s: Vector3::new(0.1, 0.0, -0.05),
             w_body_rad_s: Vector3::new(0.2, -0.1, 0.05),
         }),
-        setpoint: WireSetpoint::from(&Setpoint::hover(p, 0.0)),
+        setpoint: Some(Setpoint::hover(p, 0.0)),
     }
 }
 
@@ -548,11 +586,7 @@ fn fly_with_drops(
                     panic!("a fresh input must step")
                 };
                 let dt_s = dt_of(since.unwrap_or(1));
-                let r = reference.step(
-                    &State::from(&input.state),
-                    &Setpoint::from(&input.setpoint),
-                    dt_s,
-                );
+                let r = reference.step(&State::from(&input.state), &input.setpoint.unwrap(), dt_s);
                 assert!(!r.faults.is_fault(), "{:?}", r.faults);
                 since = Some(0);
                 let mut a = [0.0; 6];
@@ -639,7 +673,7 @@ fn fly_schedule(
             l.on_input(input);
             let r = reference.step(
                 &State::from(&input.state),
-                &Setpoint::from(&input.setpoint),
+                &input.setpoint.unwrap(),
                 dt_periods[steps as usize] as f32 * DT_S,
             );
             let mut a = [0.0; 6];
@@ -687,11 +721,7 @@ fn dt_is_one_period_after_a_watchdog_trip() {
     for arrival in &arrivals {
         if let Some(input) = arrival {
             l.on_input(*input);
-            let r = reference.step(
-                &State::from(&input.state),
-                &Setpoint::from(&input.setpoint),
-                DT_S,
-            );
+            let r = reference.step(&State::from(&input.state), &input.setpoint.unwrap(), DT_S);
             last = Some(r.a);
         }
         let outcome = l.tick(&mut m, &mut NoCost);
@@ -701,4 +731,146 @@ fn dt_is_one_period_after_a_watchdog_trip() {
         }
     }
     assert_eq!(l.report().watchdog_trips, 1);
+}
+
+/// The frame sizes the link's module doc, `crazyflie.rs`'s baud rate and the README's link budget
+/// are computed from (postcard varints at their longest, and at a sequence number below 2²¹).
+#[test]
+fn frame_sizes_fit_the_baud_budget() {
+    let len = |msg: &Uplink| {
+        let mut buf = [0u8; link::MAX_FRAME];
+        link::encode(msg, &mut buf).unwrap()
+    };
+    let full = |seq| Uplink::Input(hover_input(seq));
+    let bare = |seq| {
+        Uplink::Input(Input {
+            setpoint: None,
+            ..hover_input(seq)
+        })
+    };
+    assert_eq!(len(&full(u32::MAX)), 122);
+    assert_eq!(len(&full((1 << 21) - 1)), 120);
+    assert_eq!(len(&bare(u32::MAX)), 66);
+    assert_eq!(len(&bare((1 << 21) - 1)), 64);
+    let with_acc = Uplink::Input(Input {
+        state: WireState {
+            acc: Some([0.0, 0.0, 9.81]),
+            ..hover_input(1).state
+        },
+        ..hover_input((1 << 21) - 1)
+    });
+    assert_eq!(len(&with_acc), 132);
+    let mut buf = [0u8; link::MAX_FRAME];
+    let worst = Telemetry {
+        seq: u32::MAX,
+        step_cost: u32::MAX,
+        bad_frames: u32::MAX,
+        watchdog_trips: u32::MAX,
+        faults: u16::MAX,
+        duty: [u16::MAX; 4],
+        ..Telemetry::default()
+    };
+    assert_eq!(
+        link::encode(&Downlink::Telemetry(worst), &mut buf).unwrap(),
+        98
+    );
+    // In flight: seq < 2²¹, duty ≥ 2¹⁴, a few faults bits, a step of < 2²¹ cycles, no errors.
+    let typical = Telemetry {
+        seq: (1 << 21) - 1,
+        step_cost: 30_000,
+        faults: 0x70,
+        duty: [40_000; 4],
+        ..Telemetry::default()
+    };
+    assert_eq!(
+        link::encode(&Downlink::Telemetry(typical), &mut buf).unwrap(),
+        84
+    );
+    // 8N1: 10 bits a byte. Uplink with the setpoint every tick, downlink at its longest.
+    let bytes_per_ms = |baud: u32| baud / 10 / 1000;
+    assert!(120 * crate::control_loop::LOOP_HZ / 1000 <= bytes_per_ms(2_000_000) * 6 / 10);
+    assert!(98 * 500 / 1000 <= bytes_per_ms(1_000_000) / 2);
+}
+
+#[test]
+fn setpoint_is_held_between_inputs_and_forgotten_on_a_watchdog_trip() {
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut reference =
+        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    let mut m = motors();
+    let bare = |seq| Input {
+        setpoint: None,
+        ..off_input(seq)
+    };
+    // A state without any setpoint yet: no step, motors off.
+    l.on_input(bare(1));
+    assert_eq!(l.tick(&mut m, &mut NoCost), TickOutcome::Idle);
+    assert_eq!([m.m1.0, m.m2.0, m.m3.0, m.m4.0], [0; 4]);
+    assert_eq!(l.status(), link::LinkStatus::WaitingForState);
+    // One with a setpoint, then states alone: each flies the held setpoint, exactly as a
+    // controller given that setpoint every step.
+    let sp = off_input(2).setpoint.unwrap();
+    for seq in 2..8 {
+        l.on_input(if seq == 2 { off_input(seq) } else { bare(seq) });
+        let TickOutcome::Stepped(t) = l.tick(&mut m, &mut NoCost) else {
+            panic!("input {seq} did not step")
+        };
+        let want = reference.step(
+            &State::from(&off_input(seq).state),
+            &sp,
+            crate::control_loop::DT_S,
+        );
+        assert_eq!(t.rpm, want.rotors.rpm, "input {seq}");
+        assert!(t.rpm.iter().all(|r| *r > 1000.0));
+    }
+    // Silence until the watchdog trips: the setpoint is forgotten, a bare state does not step.
+    while l.tick(&mut m, &mut NoCost) != TickOutcome::Stopped(link::LinkStatus::WatchdogTripped) {}
+    l.on_input(bare(100));
+    assert_eq!(l.tick(&mut m, &mut NoCost), TickOutcome::Idle);
+    assert_eq!([m.m1.0, m.m2.0, m.m3.0, m.m4.0], [0; 4]);
+    l.on_input(off_input(101));
+    assert!(matches!(
+        l.tick(&mut m, &mut NoCost),
+        TickOutcome::Stepped(_)
+    ));
+}
+
+/// Decoded inputs of every kind (random fields; unit, slightly and far off-unit and non-finite
+/// quaternions) through the control loop: never a panic; a quaternion whose norm is off 1 by
+/// more than 2e-4 (the documented tolerance is ≈ 1.4e-4: `hamflight::lie::rot_from_quat`) or
+/// with a non-finite component is a `bad_state` with the motors off; one within 1e-4 is not.
+#[test]
+fn malformed_quaternions_are_bad_states_never_panics() {
+    let mut rng = SplitMix64(0x9A7);
+    let mut l = ControlLoop::new(Ok(NominalModel::default()));
+    let mut m = motors();
+    let (mut refused, mut accepted) = (0, 0);
+    for seq in 1..4000u32 {
+        let Uplink::Input(mut input) = random_uplink(&mut rng) else {
+            continue;
+        };
+        input.seq = seq;
+        // Through the frame codec, as the firmware receives it.
+        let mut buf = [0u8; link::MAX_FRAME];
+        let n = link::encode(&Uplink::Input(input), &mut buf).unwrap();
+        let Some(Ok(Uplink::Input(input))) = decode_all::<Uplink>(&buf[..n]).pop() else {
+            panic!("{input:?} did not decode")
+        };
+        let q = input.state.q;
+        let norm = q.iter().map(|&c| f64::from(c).powi(2)).sum::<f64>().sqrt();
+        l.on_input(input);
+        let TickOutcome::Stepped(t) = l.tick(&mut m, &mut NoCost) else {
+            continue; // no setpoint held yet
+        };
+        let bad = t.faults & link::fault_bits::BAD_STATE != 0;
+        if !norm.is_finite() || (norm - 1.0).abs() > 2e-4 {
+            assert!(bad, "q = {q:?} (|q| = {norm}) was accepted");
+            assert_eq!([m.m1.0, m.m2.0, m.m3.0, m.m4.0], [0; 4]);
+            refused += 1;
+        } else if (norm - 1.0).abs() < 1e-4 {
+            assert!(!bad, "q = {q:?} (|q| = {norm}) was refused");
+            accepted += 1;
+        }
+    }
+    assert!(refused > 500 && accepted > 500, "{refused} / {accepted}");
 }

@@ -27,7 +27,7 @@ use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
 mod wire;
-pub use wire::{parse_request, Request, SetpointMsg};
+pub use wire::{parse_request, Request};
 
 /// Arguments of `host-train bridge`.
 #[derive(Args, Debug, Clone)]

@@ -6,6 +6,11 @@ use nalgebra::Vector3;
 use crate::plant::PlantState;
 
 /// One point of a reference trajectory: the flat outputs and their derivatives (f64).
+///
+/// The host's f64 twin of the core's [`hamflight::Setpoint`], kept because the precision differs:
+/// trajectories, the SITL plant and the f64 baselines work in f64. The conversion to the core's
+/// f32 setpoint is the `From` below (and [`hamflight::State`]'s from the plant's [`PlantState`]
+/// beside it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrajectoryPoint {
     /// Desired position p* (m, world).
@@ -36,6 +41,7 @@ impl TrajectoryPoint {
     }
 }
 
+/// f64 → f32, field by field: how a host setpoint becomes the core's.
 impl From<&TrajectoryPoint> for hamflight::Setpoint {
     fn from(t: &TrajectoryPoint) -> Self {
         hamflight::Setpoint {
@@ -49,6 +55,8 @@ impl From<&TrajectoryPoint> for hamflight::Setpoint {
     }
 }
 
+/// f64 → f32, field by field: how the plant's state becomes the core's (`train/data.rs`'s
+/// `f32_state` still repeats it).
 impl From<&PlantState> for hamflight::State {
     fn from(s: &PlantState) -> Self {
         hamflight::State {

@@ -135,12 +135,18 @@ fn composite_no_worse_than_the_paper_law_on_the_paper_scenarios() {
 #[test]
 fn no_windup_on_the_step() {
     let sc = scenario("step");
-    let c = window(&fly("adaptive-composite", &sc)); // measured 0.016 cm (gradient: 0.51 cm)
+    // The default (the paper's gradient law) with setpoint shaping and its freeze: measured
+    // 0.030 cm (0.51 cm before; issue 11 item 3's bar 0.05 cm).
+    let d = window(&fly("adaptive", &sc));
+    assert!(d <= 0.0005, "adaptive on step: {d:.6} m over t ≥ 5 s");
+    let gd = window(&fly("geometric-adaptive", &sc)); // measured 0.024 cm (0.69 before)
+    assert!(gd <= 0.0005, "geometric-adaptive on step: {gd:.6} m");
+    let c = window(&fly("adaptive-composite", &sc)); // measured 0.023 cm
     assert!(
         c <= 0.0005,
         "adaptive on step: {c:.6} m over t ≥ 5 s (bar 0.05 cm)"
     );
-    let g = window(&fly("geometric-adaptive-composite", &sc)); // measured 0.011 (gradient 0.69)
+    let g = window(&fly("geometric-adaptive-composite", &sc));
     assert!(g <= 0.0005, "geometric-adaptive on step: {g:.6} m");
 }
 
@@ -195,12 +201,6 @@ fn wrong_features_keep_the_estimate_bounded_and_the_vehicle_up() {
     let cases = [(5.0, 0.0), (0.2, 0.0), (1.0, 0.01), (1.0, -0.01)];
     for law in [AdaptationLaw::Composite, AdaptationLaw::Gradient] {
         for (scale, bias) in cases {
-            if law == AdaptationLaw::Gradient && scale > 1.0 {
-                // Not asserted: the paper's law has no answer to features 5× too large. Its
-                // rate grows with |W|², 25× here, and the tracking-error loop loses its damping
-                // (it crashes after 1.3 s on paper-spiral). Composite, the default, holds it.
-                continue;
-            }
             let model = WrongFeatures {
                 inner: nominal,
                 scale,
@@ -225,11 +225,14 @@ fn wrong_features_keep_the_estimate_bounded_and_the_vehicle_up() {
                 100.0 * window(&r),
                 100.0 * r.max_err_m
             );
-            // measured worst: composite 0.94 cm (+0.01), gradient 4.7 cm (×0.2).
+            // measured worst: composite 0.0216 cm (×0.2); gradient 8.1 cm (+0.01: the
+            // normalized gradient slows the law 150× for features that far from nominal, so it
+            // flies about as without adaptation) and 0.33 cm at ×5 (crashed at 1.3 s before the
+            // normalization).
             let bar = if law == AdaptationLaw::Composite {
                 0.015
             } else {
-                0.07
+                0.15
             };
             assert!(window(&r) <= bar, "{law:?} ×{scale} +{bias}: {r:?}");
         }

@@ -290,3 +290,48 @@ fn a_line_that_is_not_utf8_gets_an_error_and_the_stream_goes_on() {
     let hover: serde_json::Value = serde_json::from_str(lines[1]).expect("json");
     assert_eq!(hover["faults"]["fault"], false, "CRLF line parsed: {hover}");
 }
+
+/// The setpoint object is the core's `Setpoint` (its `serde` form) and keeps the documented
+/// protocol: names `p`, `v`, `a`, `j`, `yaw`, `yaw_rate`; only `p` required, the rest zero by
+/// default; integers and decimals alike; unknown or misspelt names, a missing `p` and arrays of
+/// the wrong length are errors.
+#[test]
+fn setpoint_json_keeps_the_documented_form() {
+    use host_train::bridge::parse_request;
+    use nalgebra::Vector3;
+    let with = |sp: &str| HOVER.replace("{\"p\": [0, 0, 1]}", sp);
+    let (_, sp) = parse_request(HOVER)
+        .expect("the hover line parses")
+        .to_core();
+    assert_eq!(
+        sp,
+        hamflight::Setpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0)
+    );
+    let full = with(
+        r#"{"p": [0.5, -1, 2.25], "v": [0.1, 0, 0], "a": [0, 0.2, 0], "j": [0, 0, -3], "yaw": 0.5, "yaw_rate": -0.25}"#,
+    );
+    let (_, sp) = parse_request(&full)
+        .expect("the full setpoint parses")
+        .to_core();
+    assert_eq!(
+        sp,
+        hamflight::Setpoint {
+            p_m: Vector3::new(0.5, -1.0, 2.25),
+            v_m_s: Vector3::new(0.1, 0.0, 0.0),
+            a_m_s2: Vector3::new(0.0, 0.2, 0.0),
+            j_m_s3: Vector3::new(0.0, 0.0, -3.0),
+            yaw_rad: 0.5,
+            yaw_rate_rad_s: -0.25,
+        }
+    );
+    for bad in [
+        r#"{"p": [0, 0, 1], "vel": [0, 0, 0]}"#,
+        r#"{"p_m": [0, 0, 1]}"#,
+        r#"{"v": [0, 0, 0]}"#,
+        r#"{"p": [0, 0]}"#,
+        r#"{"p": [0, 0, 1, 2]}"#,
+        r#"{"p": [0, 0, 1], "yaw": "north"}"#,
+    ] {
+        assert!(parse_request(&with(bad)).is_err(), "{bad} was accepted");
+    }
+}

@@ -123,8 +123,12 @@ pub struct ModelWeights {
 }
 
 impl Default for ModelWeights {
+    /// All-zero networks on the stock vehicle's mass ([`MASS_KG`]).
     fn default() -> Self {
-        Self::ZERO
+        Self {
+            mass_kg: MASS_KG,
+            ..Self::ZERO
+        }
     }
 }
 
@@ -138,9 +142,11 @@ impl ModelWeights {
     /// Number of parameters (f32) of the three networks.
     pub const PARAMS: usize = InertiaNet::PARAMS + GainNet::PARAMS + DisturbanceNet::PARAMS;
 
-    /// All-zero networks on the stock vehicle's mass, as a constant.
+    /// Every bit zero, the mass too: a place to decode a blob into ([`crate::blob::decode_into`]
+    /// sets every field), not a model to fly. All-zero keeps a `static` of it in `.bss`; a
+    /// non-zero mass would put a 10 KB initializer image in flash.
     pub const ZERO: Self = Self {
-        mass_kg: MASS_KG,
+        mass_kg: 0.0,
         inertia: Mlp::ZERO,
         gain: Mlp::ZERO,
         disturbance: Mlp::ZERO,

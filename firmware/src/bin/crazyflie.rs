@@ -1,6 +1,7 @@
 //! hamflight on a Crazyflie 2.1: HSE 8 MHz → PLL 168 MHz, motors on TIM2/TIM4 (brushed, 328 kHz
 //! PWM as crazyflie-firmware drives them), the link on the deck UART (USART3, PC10 TX / PC11 RX,
-//! 1 Mbaud), the control loop on TIM5. Logs over defmt-rtt; panics through panic-probe.
+//! 1 Mbaud, or 2 Mbaud with `loop-1khz`), the control loop on TIM5. Logs over defmt-rtt; panics
+//! through panic-probe.
 #![no_std]
 #![no_main]
 
@@ -12,8 +13,19 @@ use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::serial::{config::Config, Rx, Serial};
 
-/// Link baud rate: an Input frame is ~145 bytes, 500 of them a second need ~730 kbit/s.
-const LINK_BAUD: u32 = 1_000_000;
+/// Link baud rate. At 8N1 (10 bits a byte) 1 Mbaud carries 100 bytes/ms each way. An Input
+/// frame with its setpoint is 120 bytes (`link`'s module doc; 64 without it), a Telemetry frame
+/// about 84 (98 at most). At 500 Hz that is 60 and 42 bytes/ms: 1 Mbaud. At 1 kHz it is 120 and
+/// 84, more than 1 Mbaud carries up and too close to it down, so the `loop-1khz` build runs the
+/// link at 2 Mbaud (60 % and 42 % used). USART3 is on APB1 (42 MHz here): the divider 42 MHz /
+/// (16 · 2 Mbaud) = 1 + 5/16 is exact in BRR (4 fraction bits), as 2 + 10/16 is for 1 Mbaud; the
+/// APB1 USARTs reach 2.625 Mbaud with 16× oversampling, 5.25 with 8× (RM0090 §30.3.4). The other
+/// end must run the same rate.
+const LINK_BAUD: u32 = if cfg!(feature = "loop-1khz") {
+    2_000_000
+} else {
+    1_000_000
+};
 
 /// The link's receiver: deck connector UART1 = USART3 (PC10 TX / PC11 RX; USART6 is the nRF51
 /// syslink).

@@ -90,7 +90,7 @@ fn main() -> ! {
 mod bench {
     use super::*;
     use hamflight_firmware::control_loop::DT_S;
-    use hamflight_firmware::link::{Input, WireSetpoint, WireState};
+    use hamflight_firmware::link::{Input, WireState};
     use libm::{cosf, sinf};
     use nalgebra::{Rotation3, Vector3};
 
@@ -122,7 +122,7 @@ mod bench {
         Input {
             seq: k,
             state: WireState::from(&state),
-            setpoint: WireSetpoint::from(&sp),
+            setpoint: Some(sp),
         }
     }
 

@@ -7,30 +7,14 @@ use hamflight::{Measurement, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
-/// The setpoint part of a request.
-#[derive(Deserialize, Debug, Clone)]
-#[serde(deny_unknown_fields)]
-pub struct SetpointMsg {
-    /// Desired position (m, world).
-    pub p: [f64; 3],
-    /// Desired velocity (m/s, world).
-    #[serde(default)]
-    pub v: [f64; 3],
-    /// Desired acceleration (m/s², world).
-    #[serde(default)]
-    pub a: [f64; 3],
-    /// Desired jerk (m/s³, world).
-    #[serde(default)]
-    pub j: [f64; 3],
-    /// Desired yaw (rad).
-    #[serde(default)]
-    pub yaw: f64,
-    /// Desired yaw rate (rad/s).
-    #[serde(default)]
-    pub yaw_rate: f64,
-}
-
 /// One request line.
+///
+/// The setpoint is the core's [`Setpoint`] itself (its `serde` feature keeps the bridge's names
+/// `p`, `v`, `a`, `j`, `yaw`, `yaw_rate`, the defaults and the refusal of unknown names; serde_json
+/// reads its numbers straight to f32). The state's fields stay inline, not a nested
+/// core [`State`]: the documented line is flat (`p`, `R`, `v`, `w` beside `t`), with R row-major
+/// as nested rows, and serde cannot flatten into a struct that refuses unknown fields.
+/// [`Request::to_core`] is the one conversion.
 #[derive(Deserialize, Debug, Clone)]
 #[serde(deny_unknown_fields)]
 pub struct Request {
@@ -46,7 +30,7 @@ pub struct Request {
     /// Angular velocity (rad/s, body frame).
     pub w: [f64; 3],
     /// The setpoint.
-    pub setpoint: SetpointMsg,
+    pub setpoint: Setpoint,
     /// Optional accelerometer: the specific force (m/s², body frame; +9.8 along body z at
     /// hover). The composite adaptation law uses it; without it, it differences the velocity.
     #[serde(default)]
@@ -81,7 +65,6 @@ impl Request {
                 .copied()
                 .unwrap_or(f64::NAN) as f32
         });
-        let s = &self.setpoint;
         (
             State {
                 p_m: v3(self.p),
@@ -89,14 +72,7 @@ impl Request {
                 v_body_m_s: v3(self.v),
                 w_body_rad_s: v3(self.w),
             },
-            Setpoint {
-                p_m: v3(s.p),
-                v_m_s: v3(s.v),
-                a_m_s2: v3(s.a),
-                j_m_s3: v3(s.j),
-                yaw_rad: s.yaw as f32,
-                yaw_rate_rad_s: s.yaw_rate as f32,
-            },
+            self.setpoint,
         )
     }
 }
