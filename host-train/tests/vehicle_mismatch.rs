@@ -293,3 +293,95 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+fn import_args(out: &Path, log: &Path) -> host_train::import::ImportArgs {
+    host_train::import::ImportArgs {
+        out: out.to_path_buf(),
+        logs: vec![log.to_path_buf()],
+        calm: Vec::new(),
+        format: host_train::import::LogFormat::Auto,
+        mass_kg: 0.034,
+        gravity_m_s2: 9.8,
+        inertia_kg_m2: Some(vec![1.82e-5, 1.82e-5, 2.821e-5]),
+        rotor_efficiency: Some(vec![1.0, 1.0, 0.9, 1.0]),
+        motor_tau_s: Some(0.02),
+        command_vars: host_train::import::LEE_COMMAND_VARS
+            .map(String::from)
+            .to_vec(),
+        min_height_m: 0.1,
+        min_thrust_frac: 0.25,
+        trim_s: 0.5,
+        allow_bad_crc: false,
+    }
+}
+
+#[test]
+fn import_records_the_vehicle_and_checks_its_flags() {
+    let dir = tmpdir("import");
+    let mut sc = scenario("mismatch-calm-spiral");
+    sc.spec.duration_s = 3.0;
+    let mut lee = host_train::baselines::by_name("geometric", &sc).unwrap();
+    let mut rec = host_train::usdrecord::UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
+    assert!(host_train::eval::fly(&sc, &mut rec).crash_time_s.is_none());
+    let log = dir.join("heavy.bin");
+    rec.write(&log).unwrap();
+
+    let bad = |f: &dyn Fn(&mut host_train::import::ImportArgs), flag: &str| {
+        let mut a = import_args(&dir.join("bad"), &log);
+        f(&mut a);
+        let e = format!("{:#}", host_train::import::run(&a).unwrap_err());
+        assert!(e.contains(flag), "{flag}: {e}");
+        assert!(!dir.join("bad").join("manifest.json").exists());
+    };
+    bad(
+        &|a| a.inertia_kg_m2 = Some(vec![1e-5, 1e-5]),
+        "--inertia-kg-m2",
+    );
+    bad(
+        &|a| a.inertia_kg_m2 = Some(vec![1e-5, -1e-5, 1e-5]),
+        "--inertia-kg-m2",
+    );
+    bad(
+        &|a| a.rotor_efficiency = Some(vec![1.0, 1.0, 0.0, 1.0]),
+        "--rotor-efficiency",
+    );
+    bad(&|a| a.motor_tau_s = Some(-0.01), "--motor-tau-s");
+    bad(&|a| a.motor_tau_s = Some(f64::NAN), "--motor-tau-s");
+
+    let realized = dir.join("realized");
+    host_train::import::run(&import_args(&realized, &log)).unwrap();
+    let logged = dir.join("logged");
+    host_train::import::run(&host_train::import::ImportArgs {
+        motor_tau_s: None,
+        ..import_args(&logged, &log)
+    })
+    .unwrap();
+    let r = dataset::load(&realized).unwrap();
+    let l = dataset::load(&logged).unwrap();
+    assert_eq!(r.manifest.vehicle.motor_tau_s, Some(0.02));
+    assert_eq!(l.manifest.vehicle.motor_tau_s, None);
+    assert_eq!(
+        r.manifest.vehicle.inertia_kg_m2,
+        Some([1.82e-5, 1.82e-5, 2.821e-5])
+    );
+    assert_eq!(
+        r.manifest.vehicle.rotor_efficiency,
+        Some([1.0, 1.0, 0.9, 1.0])
+    );
+    // Same samples; the realized command trails the logged one, which moves (a spiral).
+    let (rs, ls) = (&r.realizations[0].flights, &l.realizations[0].flights);
+    assert_eq!(rs.len(), ls.len());
+    let mut max_diff = 0f64;
+    for (fr, fl) in rs.iter().zip(ls) {
+        assert_eq!(fr.samples.len(), fl.samples.len());
+        for (a, b) in fr.samples.iter().zip(&fl.samples) {
+            assert_eq!(a.state, b.state);
+            max_diff = max_diff.max((a.wrench[1] - b.wrench[1]).abs());
+        }
+    }
+    assert!(
+        max_diff > 1e-6,
+        "roll torque: realized and logged differ by {max_diff}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
