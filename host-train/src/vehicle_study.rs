@@ -284,9 +284,10 @@ pub struct StudyReport {
     pub vehicle: crate::plant::VehicleParams,
     /// Motor time constant (s).
     pub motor_tau_s: f64,
-    /// Logged flights: name, calm, samples kept.
+    /// Logged flights (in import order: windy, then calm): log name, calm, samples kept.
     pub logs: Vec<(String, bool, usize)>,
-    /// Training windows of the dataset (first seed's split).
+    /// One summary per trained blob: the seeds on the realized command, then the comparison
+    /// blob on the commanded one.
     pub seeds: Vec<SeedSummary>,
     /// Every flight of the table.
     pub flights: Vec<Flown>,

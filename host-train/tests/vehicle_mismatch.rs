@@ -180,8 +180,8 @@ fn one(r: &StudyReport, controller: &str, scenario: &str) -> f64 {
     v[0]
 }
 
-/// The study, sized for CI: eight 8 s Lee flights logged at 500 Hz (≈ 6,600 windows, near the
-/// paper's 8,640), three seeds of 12 epochs plus one trained on the commanded wrench.
+/// The study, sized for CI: eight 8 s Lee flights logged at 500 Hz (≈ 7,000 windows; the paper
+/// had 8,640), three seeds of 12 epochs plus one trained on the commanded wrench.
 #[test]
 fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     let out = tmpdir("study");
