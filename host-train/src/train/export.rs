@@ -85,6 +85,8 @@ pub struct TrainReport {
     pub true_mass_kg: f32,
     /// The manifest's motor time constant (s): the commands were realized through it at import.
     pub motor_tau_s: Option<f64>,
+    /// The SITL flight check before writing ([`super::check`]); null when skipped.
+    pub flight_check: Option<super::check::FlightCheck>,
     /// Learned J at hover (R = I), kg·m², row-major.
     pub learned_inertia_hover_kg_m2: [[f32; 3]; 3],
     /// The true J (kg·m²), from the manifest (null when it gives none).
@@ -265,6 +267,7 @@ pub fn report(
         mass_kg: model_mass,
         true_mass_kg: true_mass,
         motor_tau_s: data.vehicle.motor_tau_s,
+        flight_check: None,
         learned_inertia_hover_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| j[(r, c)])),
         true_inertia_kg_m2: true_j
             .map(|tj| std::array::from_fn(|r| std::array::from_fn(|c| tj[(r, c)]))),

@@ -9,6 +9,7 @@
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
 
 pub mod blackbox;
+pub mod check;
 pub mod data;
 pub mod export;
 #[path = "loop.rs"]
@@ -61,6 +62,9 @@ pub struct TrainConfig {
     /// The vehicle's mass (kg), carried in the blob; `None` (default) takes the dataset
     /// manifest's `mass_kg`.
     pub mass_kg: Option<f64>,
+    /// Fly the new blob in the SITL before writing it, and refuse to write one that crashes the
+    /// adaptive controller ([`check`]; default true).
+    pub flight_check: bool,
 }
 
 impl Default for TrainConfig {
@@ -80,6 +84,7 @@ impl Default for TrainConfig {
             features: FEATURES,
             window: crate::dataset::WindowSpec::default(),
             mass_kg: None,
+            flight_check: true,
         }
     }
 }
@@ -121,7 +126,11 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
     let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
     let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
     to_hover_feature_basis(&mut trained);
-    let report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
+    let mut report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
+    if cfg.flight_check {
+        let mass = f64::from(windows.manifest_mass_kg);
+        report.flight_check = Some(check::require(&trained.weights, mass, &windows.vehicle)?);
+    }
     export::write(out, &trained.weights, &report)?;
     Ok(report)
 }
@@ -177,6 +186,11 @@ pub struct TrainArgs {
     /// or what `import --mass-kg` was told).
     #[arg(long, value_name = "KG")]
     pub mass_kg: Option<f64>,
+    /// Write the blob without the flight check: by default the new model first flies an 8 s
+    /// spiral under wind in the SITL, adaptive and without adaptation, on the dataset's vehicle,
+    /// and nothing is written if adaptive crashes or tracks worse.
+    #[arg(long)]
+    pub no_flight_check: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -201,6 +215,7 @@ impl TrainArgs {
                 stride: self.stride,
             },
             mass_kg: self.mass_kg,
+            flight_check: !self.no_flight_check,
             ..TrainConfig::default()
         }
     }
@@ -241,6 +256,15 @@ pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
             last(&n.rot_rad),
             last(&n.vel_m_s),
             last(&n.rate_rad_s),
+        );
+    }
+    if let Some(c) = &r.flight_check {
+        let cm = |v: Option<f64>| v.map_or("—".into(), |m| format!("{:.2} cm", 100.0 * m));
+        println!(
+            "flight check (SITL, the dataset's vehicle, 8 s spiral under wind): adaptive {}, \
+             without adaptation {}: passed",
+            cm(c.adaptive_rmse_m),
+            cm(c.learned_rmse_m)
         );
     }
     println!(

@@ -1,0 +1,113 @@
+//! The trainer's flight check (issue 10 item 4): a good blob passes on its vehicle, a blob that
+//! would crash the adaptive controller is refused with a reason, and `train` records the check.
+
+use hamflight::model::ModelWeights;
+use host_train::dataset::VehicleDescription;
+use host_train::flight;
+use host_train::train::check;
+use std::path::Path;
+
+fn shipped() -> ModelWeights {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(flight::DEFAULT_WEIGHTS);
+    flight::load_learned(&path)
+        .expect("shipped weights")
+        .weights
+}
+
+fn cf2x() -> VehicleDescription {
+    VehicleDescription {
+        inertia_kg_m2: Some([1.4e-5, 1.4e-5, 2.17e-5]),
+        rotor_efficiency: Some([1.0; 4]),
+        motor_tau_s: None,
+    }
+}
+
+#[test]
+fn shipped_blob_passes_on_the_stock_vehicle() {
+    let c = check::run(&shipped(), 0.027, &cf2x()).expect("check runs");
+    println!("{c:?}");
+    assert!(c.passed(), "{c:?}");
+    // measured: adaptive 0.012 cm, without adaptation 4.3 cm over t ≥ 5 s.
+    let (a, l) = (c.adaptive_rmse_m.unwrap(), c.learned_rmse_m.unwrap());
+    assert!(a < 0.5 * l, "adaptive {a} m against {l} m");
+}
+
+/// A model whose input gain is `scale` × the trained one: the controller then commands 1/scale
+/// of the wrench it needs, whatever the adaptation does.
+fn wrong_gain(scale: f32) -> ModelWeights {
+    let mut w = shipped();
+    let l2 = &mut w.gain.l2;
+    for v in l2.weight.iter_mut().flatten().chain(l2.bias.iter_mut()) {
+        *v *= scale;
+    }
+    w
+}
+
+#[test]
+fn a_blob_that_crashes_is_refused_with_a_reason() {
+    for scale in [3.0f32, -1.0] {
+        let c = check::run(&wrong_gain(scale), 0.027, &cf2x()).expect("check runs");
+        println!("g ×{scale}: {c:?}");
+    }
+    let w = wrong_gain(SCALE);
+    let c = check::run(&w, 0.027, &cf2x()).expect("check runs");
+    println!("{c:?}");
+    assert!(!c.passed() && c.adaptive_crash_s.is_some(), "{c:?}");
+    let err = check::require(&w, 0.027, &cf2x()).unwrap_err().to_string();
+    assert!(
+        err.contains("flight check failed: adaptive crashed")
+            && err.contains("Nothing was written"),
+        "{err}"
+    );
+    assert!(err.contains("--no-flight-check"), "{err}");
+}
+
+const SCALE: f32 = 3.0;
+
+/// Features far from any the rates were tuned for (the wind columns also carrying a large body
+/// torque) no longer crash the adaptive controller, thanks to the normalized gradient: the
+/// check passes them as "not worse than without adaptation".
+#[test]
+fn torque_coupled_features_fly_no_worse_than_without_adaptation() {
+    use hamflight::model::FEATURES;
+    let mut w = shipped();
+    let l2 = &mut w.disturbance.l2;
+    for row in 0..3 {
+        for k in 0..FEATURES {
+            let (f, t) = (row * FEATURES + k, (row + 3) * FEATURES + k);
+            let (wf, bf) = (l2.weight[f], l2.bias[f]);
+            for (dst, src) in l2.weight[t].iter_mut().zip(wf.iter()) {
+                *dst += 30.0 * src;
+            }
+            l2.bias[t] += 30.0 * bf;
+        }
+    }
+    let c = check::run(&w, 0.027, &cf2x()).expect("check runs");
+    println!("{c:?}");
+    // measured: adaptive 3.3 cm, without adaptation 3.7 cm.
+    assert!(c.passed(), "{c:?}");
+}
+
+#[test]
+fn the_check_flies_the_described_vehicle() {
+    let heavy = VehicleDescription {
+        inertia_kg_m2: Some([1.82e-5, 1.82e-5, 2.82e-5]),
+        rotor_efficiency: Some([1.0, 1.0, 0.9, 1.0]),
+        motor_tau_s: Some(0.02),
+    };
+    let toml = check::scenario_toml(0.034, &heavy);
+    for key in [
+        "mass_kg = 0.034",
+        "inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.82e-5]",
+        "rotor_efficiency = [1.0, 1.0, 0.9, 1.0]",
+        "motor_tau_s = 0.02",
+    ] {
+        assert!(toml.contains(key), "{key} missing in\n{toml}");
+    }
+    // The stock blob on that vehicle still flies (the adaptation absorbs the mass error).
+    let c = check::run(&shipped(), 0.034, &heavy).expect("check runs");
+    println!("{c:?}");
+    assert!(c.adaptive_crash_s.is_none(), "{c:?}");
+}
