@@ -21,20 +21,8 @@ pub const SETTLE_S: f64 = 4.0;
 /// The frequencies of issue 13's table (Hz).
 pub const FREQUENCIES_HZ: [f64; 4] = [0.25, 0.5, 1.0, 2.0];
 
-/// One tick of a tracked flight: t (s), the true wind and the compensated specific force
-/// R (W a)_v / m (both m/s², world frame).
-pub type DisturbanceSample = (f64, Vector3<f64>, Vector3<f64>);
-
-/// One point of the estimator's frequency response.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct BandwidthPoint {
-    /// Wind frequency (Hz).
-    pub frequency_hz: f64,
-    /// |estimate| / |wind| at that frequency.
-    pub amplitude_ratio: f64,
-    /// Phase lag of the estimate behind the wind (degrees; positive = behind).
-    pub lag_deg: f64,
-}
+// The data the plots draw are defined with them (`plot` does not depend on this module).
+pub use crate::plot::{BandwidthPoint, DisturbanceSample};
 
 /// The compensated disturbance as a world-frame specific force, R (W a)_v / m (m/s²).
 pub fn compensated_specific_force<M: HamiltonianModel>(

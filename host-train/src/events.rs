@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::eval::FlightLog;
+use crate::flightlog::FlightLog;
 use crate::scenario::Scenario;
 
 /// The error (m) below which the vehicle counts as recovered.

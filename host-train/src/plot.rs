@@ -6,8 +6,24 @@ use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
-use crate::estimator::DisturbanceSample;
 use crate::flightlog::FlightLog;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// One tick of a tracked flight: t (s), the true wind and the compensated specific force
+/// R (W a)_v / m (both m/s², world frame).
+pub type DisturbanceSample = (f64, Vector3<f64>, Vector3<f64>);
+
+/// One point of the estimator's frequency response.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BandwidthPoint {
+    /// Wind frequency (Hz).
+    pub frequency_hz: f64,
+    /// |estimate| / |wind| at that frequency.
+    pub amplitude_ratio: f64,
+    /// Phase lag of the estimate behind the wind (degrees; positive = behind).
+    pub lag_deg: f64,
+}
 use crate::fsutil::write_atomic;
 
 const PALETTE: [RGBColor; 6] = [
@@ -346,7 +362,7 @@ pub fn disturbance_svg(
 /// estimate against a sinusoidal wind.
 pub fn bandwidth_svg(
     controller: &str,
-    series: &[(&str, &[crate::estimator::BandwidthPoint])],
+    series: &[(&str, &[BandwidthPoint])],
     path: &Path,
 ) -> Result<()> {
     let mut buf = String::new();
@@ -366,7 +382,7 @@ pub fn bandwidth_svg(
             * 1.1;
         let panels = root.split_evenly((2, 1));
         for (k, area) in panels.iter().enumerate() {
-            let val = |p: &crate::estimator::BandwidthPoint| {
+            let val = |p: &BandwidthPoint| {
                 if k == 0 {
                     p.amplitude_ratio
                 } else {
