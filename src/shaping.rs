@@ -13,7 +13,9 @@
 //! **What.** The shaped setpoint is the raw one plus an offset δ (position, velocity,
 //! acceleration and jerk) that obeys δ̈ = −ω² δ − 2ζω δ̇ (critically damped, ζ = 1). A jump of
 //! the raw setpoint beyond what its own velocity and acceleration predict over the tick — more
-//! than [`JUMP_POSITION_M`] or [`JUMP_VELOCITY_M_S`] — is absorbed into δ, so the shaped
+//! than [`JUMP_POSITION_M`] or [`JUMP_VELOCITY_M_S`] — is absorbed into δ (a setpoint repeated
+//! for several ticks, as a 100 Hz commander under a 500 Hz loop sends it, is predicted over
+//! the whole hold), so the shaped
 //! setpoint stays continuous and then converges to the raw one with time constant 1/ω. A smooth
 //! trajectory never jumps: δ stays exactly zero and the controller sees the raw setpoint bit for
 //! bit (paper-spiral is unchanged). Once δ has decayed below [`SETTLED_M`] it snaps to zero.
@@ -36,14 +38,19 @@ pub const SHAPING_FREEZE_M: f32 = 0.02;
 /// δ of the shaped setpoint, and the shaped setpoint while δ ≠ 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SetpointShaper {
-    /// Whether `pred_*` hold a prediction (false before the first tick and after a reset).
+    /// Whether `last_*` hold a setpoint (false before the first tick and after a reset).
     primed: bool,
     /// δ ≠ 0 (kept as a flag: the common, inactive tick tests one bool).
     active: bool,
-    /// The previous raw setpoint's position and velocity carried one tick ahead by its own
-    /// velocity and acceleration (m, m/s).
-    pred_p_m: Vector3<f32>,
-    pred_v_m_s: Vector3<f32>,
+    /// The last raw setpoint that differed from its predecessor: position, velocity and
+    /// acceleration (m, m/s, m/s²).
+    last_p_m: Vector3<f32>,
+    last_v_m_s: Vector3<f32>,
+    last_a_m_s2: Vector3<f32>,
+    /// How long (s) the raw setpoint has been held unchanged since `last_*`: a commander that
+    /// updates at 100 Hz repeats each setpoint for several ticks, and its next one follows
+    /// from this one over the whole hold, not over one tick.
+    held_s: f32,
     /// δ (m).
     offset_m: Vector3<f32>,
     /// δ̇ (m/s).
@@ -93,24 +100,34 @@ impl SetpointShaper {
             }
             return false;
         }
-        if self.primed {
-            let jump_p = sp.p_m - self.pred_p_m;
-            if jump_p.norm_squared() > JUMP_POSITION_M * JUMP_POSITION_M {
-                self.offset_m -= jump_p;
-                self.active = true;
+        let repeated = self.primed
+            && sp.p_m == self.last_p_m
+            && sp.v_m_s == self.last_v_m_s
+            && sp.a_m_s2 == self.last_a_m_s2;
+        if repeated {
+            self.held_s += dt_s;
+        } else {
+            if self.primed {
+                // Where the last distinct setpoint's own velocity and acceleration put it now.
+                let t = self.held_s + dt_s;
+                let a_t = self.last_a_m_s2 * t;
+                let jump_p = sp.p_m - (self.last_p_m + (self.last_v_m_s + a_t * 0.5) * t);
+                if jump_p.norm_squared() > JUMP_POSITION_M * JUMP_POSITION_M {
+                    self.offset_m -= jump_p;
+                    self.active = true;
+                }
+                let jump_v = sp.v_m_s - (self.last_v_m_s + a_t);
+                if jump_v.norm_squared() > JUMP_VELOCITY_M_S * JUMP_VELOCITY_M_S {
+                    self.offset_m_s -= jump_v;
+                    self.active = true;
+                }
             }
-            let jump_v = sp.v_m_s - self.pred_v_m_s;
-            if jump_v.norm_squared() > JUMP_VELOCITY_M_S * JUMP_VELOCITY_M_S {
-                self.offset_m_s -= jump_v;
-                self.active = true;
-            }
+            self.last_p_m = sp.p_m;
+            self.last_v_m_s = sp.v_m_s;
+            self.last_a_m_s2 = sp.a_m_s2;
+            self.held_s = 0.0;
+            self.primed = true;
         }
-        // The next tick is assumed as long as this one: a jitter of the tick moves the
-        // prediction by v·Δt, far below the jump thresholds.
-        let a_dt = sp.a_m_s2 * dt_s;
-        self.pred_v_m_s = sp.v_m_s + a_dt;
-        self.pred_p_m = sp.p_m + (sp.v_m_s + a_dt * 0.5) * dt_s;
-        self.primed = true;
         if !self.active {
             return false;
         }
@@ -198,6 +215,23 @@ mod tests {
         // After 6 s (ω t = 18) it is the raw setpoint again, exactly.
         assert_eq!(last, to);
         assert!(!s.is_active());
+    }
+
+    /// A commander at 100 Hz under the 500 Hz loop: each setpoint of a 2 m/s line is repeated
+    /// for five ticks. The steps between them are what its velocity predicts: nothing shaped.
+    #[test]
+    fn a_setpoint_held_for_several_ticks_is_not_a_jump() {
+        let mut s = SetpointShaper::default();
+        for k in 0..2000 {
+            let t_update = (k / 5) as f32 * 5.0 * DT;
+            let sp = Setpoint {
+                p_m: Vector3::new(2.0 * t_update, 0.0, 1.0),
+                v_m_s: Vector3::new(2.0, 0.0, 0.0),
+                ..Setpoint::default()
+            };
+            assert_eq!(s.shape(&sp, DT, 3.0), sp, "tick {k}");
+            assert!(!s.is_active(), "tick {k}");
+        }
     }
 
     #[test]
