@@ -5,9 +5,11 @@
 //! - [`data`]: the dataset's windows as tensors, the held-out split;
 //! - [`model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex + autodiff);
 //! - [`r#loop`]: Adam, the epoch loop, the progress bar;
+//! - [`bench`]: `host-train bench-train`, seconds per epoch at several batch sizes;
 //! - [`blackbox`]: issue 4's black-box MLP baseline and the data-efficiency comparison;
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
 
+pub mod bench;
 pub mod blackbox;
 pub mod data;
 pub mod export;
@@ -50,6 +52,11 @@ pub struct TrainConfig {
     /// so tilt can stand in for a_j — and the adaptation law then chases the features
     /// (paper-spiral: 0.49 cm with λ = 0; see issue 5's note).
     pub feature_decay: f64,
+    /// Epochs of linear learning-rate warm-up before the cosine decay (default 0).
+    pub warmup_epochs: usize,
+    /// Early stop after this many epochs without a better held-out loss; the best epoch's
+    /// weights are kept either way (default 0: run all epochs).
+    pub patience: usize,
     /// Scale of the output layers' initial weights around the physical prior (default 0.05).
     pub init_out_gain: f32,
     /// Hidden width; fixed at compile time by the core ([`HIDDEN`]), checked here.
@@ -72,6 +79,8 @@ impl Default for TrainConfig {
             data_frac: 1.0,
             vel_weight: 50.0,
             feature_decay: 1.0,
+            warmup_epochs: 0,
+            patience: 0,
             init_out_gain: 0.05,
             hidden: HIDDEN,
             features: FEATURES,
