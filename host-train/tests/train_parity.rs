@@ -302,3 +302,35 @@ fn fast_training_loss_matches_the_reference_ops() {
         }
     }
 }
+
+/// A minibatch split over the cores (one autodiff graph per shard, gradients averaged by shard
+/// size) gives the whole minibatch's loss and gradients, on collected data.
+#[test]
+fn split_minibatch_gradients_equal_the_whole_batch() {
+    use host_train::collect::{collect, CollectConfig};
+    use host_train::train::{data, r#loop::initial_gradients, TrainConfig};
+    let dir = train_common::scratch("split-grads");
+    let cc = CollectConfig {
+        realizations: 2,
+        windows: 150,
+        poses: 2,
+        ..CollectConfig::default()
+    };
+    collect(&dir, &cc).expect("collect");
+    let cfg = TrainConfig::default();
+    let windows = data::load(&dir, cfg.window).expect("load");
+    let ids: Vec<usize> = (0..windows.windows.len()).collect();
+    assert!(ids.len() >= 256, "{} windows", ids.len());
+    let (l_split, g_split) = initial_gradients(&cfg, &windows, &ids, true);
+    let (l_whole, g_whole) = initial_gradients(&cfg, &windows, &ids, false);
+    assert!(
+        (l_split - l_whole).abs() <= 1e-5 * l_whole,
+        "loss {l_split} vs {l_whole}"
+    );
+    for (k, (a, b)) in g_split.iter().zip(&g_whole).enumerate() {
+        assert!(!b.is_empty(), "tensor {k} has no gradient");
+        let e = rel_err(a, b);
+        assert!(e < 1e-4, "gradient of tensor {k} off by {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

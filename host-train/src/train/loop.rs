@@ -407,6 +407,28 @@ pub fn time_epochs(
         .collect()
 }
 
+/// The mean loss over the windows `ids` and every tensor's gradient (flattened) at `cfg`'s
+/// initial weights, with the minibatch split over the cores as in training (`split`) or whole:
+/// for the test that the two agree.
+pub fn initial_gradients(
+    cfg: &TrainConfig,
+    data: &Windows,
+    ids: &[usize],
+    split: bool,
+) -> (f64, Vec<Vec<f32>>) {
+    let t = Trainer::new(cfg, data, &Device::flex());
+    let (loss, g) = if split {
+        t.loss_and_grads(ids)
+    } else {
+        t.shard_loss_and_grads(ids)
+    };
+    let g = g
+        .iter()
+        .map(|g| g.as_ref().map(to_vec).unwrap_or_default())
+        .collect();
+    (loss, g)
+}
+
 /// User + system CPU time of this process (s) from `/proc/self/stat` (Linux, 100 ticks/s).
 fn process_cpu_s() -> Option<f64> {
     let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
