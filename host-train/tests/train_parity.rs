@@ -51,15 +51,22 @@ fn tensor2(v: Vec<f32>, shape: [usize; 2], d: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(v, shape), d)
 }
 
+/// For a small batch (batched matmuls) and a large one (the small products as broadcast
+/// multiplies and sums, see `BROADCAST_MIN_BATCH` in the host model).
 #[test]
 fn core_and_host_models_agree() {
+    for n in [16, 1100] {
+        core_and_host_models_agree_at(n);
+    }
+}
+
+fn core_and_host_models_agree_at(n: usize) {
     let device = Device::flex();
     let w = weights();
     let core = LearnedModel::new(w);
     let host = TModel::from_core(&w, &device);
     let c = Consts::new(&device);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let n = 16;
     let states: Vec<State> = (0..n)
         .map(|_| train_common::random_state(&mut rng, 1.0))
         .collect();
