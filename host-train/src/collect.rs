@@ -11,6 +11,10 @@
 //! (240/4 = 60 Hz), so the trainer's default windows (5 states every 4 samples) each see one
 //! command, exactly the paper's windows. States are sampled at `--sample-hz` with physics at
 //! `sample_hz × substeps`. Each realization has its own RNG stream of `--seed`.
+//!
+//! Beyond the paper: `--calm-realizations` (default 1) calm realizations follow the M disturbed
+//! ones, marked disturbance-free, so that the shared model learns the undisturbed vehicle and
+//! the a_j only what differs from it (issue 10, item 7).
 
 use std::path::{Path, PathBuf};
 
@@ -63,6 +67,12 @@ pub struct CollectConfig {
     /// RNG seed; the same seed gives the same files.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Calm realizations appended after the M disturbed ones: no wind, all rotors at 100 %,
+    /// marked disturbance-free (training pins their a_j to 0). Without one, the shared model
+    /// and the a_j can trade any constant effect, and the learned g takes up the realizations'
+    /// mean thrust deficit (issue 10, item 7); one anchors g to the calm vehicle.
+    #[arg(long, default_value_t = 1)]
+    pub calm_realizations: usize,
 }
 
 impl Default for CollectConfig {
@@ -79,6 +89,7 @@ impl Default for CollectConfig {
             delta_max: 0.98,
             start_radius_m: 0.5,
             seed: 0,
+            calm_realizations: 1,
         }
     }
 }
@@ -147,6 +158,7 @@ pub fn draw_disturbance(c: &CollectConfig, rng: &mut impl Rng) -> Disturbance {
 
 /// Simulate one realization; returns its disturbance and one flight per pose. `on_window` is
 /// called after each held command (one training window at the default window spec).
+/// Realizations `j ≥ c.realizations` are the calm ones ([`CollectConfig::calm_realizations`]).
 pub fn collect_realization(
     c: &CollectConfig,
     j: usize,
@@ -155,7 +167,11 @@ pub fn collect_realization(
 ) -> Result<(Disturbance, Vec<Flight>)> {
     let mut rng = ChaCha8Rng::seed_from_u64(c.seed);
     rng.set_stream(j as u64);
-    let dist = draw_disturbance(c, &mut rng);
+    let dist = if j < c.realizations {
+        draw_disturbance(c, &mut rng)
+    } else {
+        Disturbance::default()
+    };
     let dt_sample = 1.0 / c.sample_hz;
     let dt_phys = dt_sample / c.substeps as f64;
     let hold = (c.window_len - 1) as f64 * dt_sample;
@@ -247,7 +263,8 @@ pub fn collect(out: &Path, c: &CollectConfig) -> Result<Manifest> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory `{}`", out.display()))?;
     let params = VehicleParams::cf2x();
-    let pb = indicatif::ProgressBar::new((c.realizations * c.windows) as u64);
+    let total = c.realizations + c.calm_realizations;
+    let pb = indicatif::ProgressBar::new((total * c.windows) as u64);
     pb.set_style(
         indicatif::ProgressStyle::with_template(
             "collect [{bar:30}] {pos}/{len} windows ({elapsed}, eta {eta})",
@@ -261,7 +278,7 @@ pub fn collect(out: &Path, c: &CollectConfig) -> Result<Manifest> {
         rotor_efficiency: Some(params.rotor_efficiency),
         motor_tau_s: None,
     };
-    for j in 0..c.realizations {
+    for j in 0..total {
         let (dist, flights) = collect_realization(c, j, &params, || pb.inc(1))?;
         ds.realizations.push(Realization {
             meta: RealizationMeta {
@@ -269,7 +286,7 @@ pub fn collect(out: &Path, c: &CollectConfig) -> Result<Manifest> {
                 source_file: None,
                 wind_m_s2: Some(dist.wind_m_s2),
                 rotor_efficiency: Some(dist.rotor_efficiency),
-                disturbance_free: false,
+                disturbance_free: j >= c.realizations,
                 flights: 0,
                 samples: 0,
             },

@@ -29,14 +29,14 @@ pub struct DemoArgs {
     /// Output directory: data/, weights.hfw(.json), report.json and the SVG figures.
     #[arg(long, value_name = "DIR", default_value = "out/demo")]
     pub out: PathBuf,
-    /// Train as long as the shipped weights were (the paper-sized run) instead of the quick
-    /// default.
-    #[arg(long)]
+    /// Kept for scripts: the demo trains as the shipped weights were trained (the training
+    /// default) with or without it.
+    #[arg(long, hide = true)]
     pub full: bool,
     /// Skip collection and training and fly with this weight blob.
     #[arg(long, value_name = "FILE")]
     pub weights: Option<PathBuf>,
-    /// Training epochs (default: 12, or the training default with --full).
+    /// Training epochs (default: the training default, as for the shipped weights).
     #[arg(long)]
     pub epochs: Option<usize>,
     /// Seed of the data collection and the training.
@@ -134,9 +134,7 @@ pub fn run(args: &DemoArgs) -> Result<DemoReport> {
                 seed: args.seed,
                 ..train::TrainConfig::default()
             };
-            tc.epochs = args
-                .epochs
-                .unwrap_or(if args.full { tc.epochs } else { 12 });
+            tc.epochs = args.epochs.unwrap_or(tc.epochs);
             let out = args.out.join("weights.hfw");
             eprintln!("[2/3] training the Hamiltonian model, {} epochs", tc.epochs);
             let report = train::run(&tc, &data, &out, false)?;

@@ -23,6 +23,9 @@ enum Command {
     /// Learn the Hamiltonian model and disturbance features (paper Problem 1) from a dataset;
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
+    /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
+    /// windows, the sizes of issue 12's PyTorch comparison; prints seconds per epoch.
+    BenchTrain(host_train::train::bench::BenchArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),
     /// Fly a scenario with both adaptation laws (the paper's gradient law and the composite law)
@@ -101,6 +104,9 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Train(args) => {
             host_train::train::run_cli(&args)?;
+        }
+        Command::BenchTrain(args) => {
+            host_train::train::bench::run(&args)?;
         }
         Command::Eval(args) => {
             let r = host_train::eval::run(&args)?;

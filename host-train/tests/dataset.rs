@@ -28,8 +28,40 @@ fn small() -> CollectConfig {
         windows: 60,
         poses: 3,
         seed: 7,
+        calm_realizations: 0,
         ..CollectConfig::default()
     }
+}
+
+/// The default collection ends with a calm realization (issue 10, item 7): no wind, rotors at
+/// 100 %, marked disturbance-free; the disturbed ones before it are unchanged by it.
+#[test]
+fn default_collection_adds_a_calm_disturbance_free_realization() {
+    let (with, without) = (tmpdir("calm-1"), tmpdir("calm-0"));
+    let one = CollectConfig {
+        calm_realizations: 1,
+        ..small()
+    };
+    assert_eq!(CollectConfig::default().calm_realizations, 1);
+    let m = collect(&with, &one).unwrap();
+    collect(&without, &small()).unwrap();
+    assert_eq!(m.realizations.len(), 3);
+    let ds = load(&with).unwrap();
+    let calm = &ds.realizations[2].meta;
+    assert!(calm.disturbance_free);
+    assert_eq!(calm.wind_m_s2, Some([0.0; 3]));
+    assert_eq!(calm.rotor_efficiency, Some([1.0; 4]));
+    assert!(ds.realizations[..2]
+        .iter()
+        .all(|r| !r.meta.disturbance_free));
+    for f in ["realization_00.csv", "realization_01.csv"] {
+        assert_eq!(
+            std::fs::read(with.join(f)).unwrap(),
+            std::fs::read(without.join(f)).unwrap()
+        );
+    }
+    std::fs::remove_dir_all(&with).ok();
+    std::fs::remove_dir_all(&without).ok();
 }
 
 #[test]
@@ -165,6 +197,7 @@ fn one_flight_dataset() -> (PathBuf, Dataset) {
         realizations: 1,
         windows: 10,
         poses: 1,
+        calm_realizations: 0,
         ..CollectConfig::default()
     };
     collect(&dir, &cfg).unwrap();

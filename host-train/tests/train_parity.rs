@@ -51,8 +51,16 @@ fn tensor2(v: Vec<f32>, shape: [usize; 2], d: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(v, shape), d)
 }
 
+/// For a small batch (batched matmuls) and a large one (the small products as broadcast
+/// multiplies and sums, see `BROADCAST_MIN_BATCH` in the host model).
 #[test]
 fn core_and_host_models_agree() {
+    for n in [16, 1100] {
+        core_and_host_models_agree_at(n);
+    }
+}
+
+fn core_and_host_models_agree_at(n: usize) {
     let device = Device::flex();
     // A vehicle heavier than the stock one: the mass must reach both sides the same way.
     let w = ModelWeights {
@@ -68,7 +76,6 @@ fn core_and_host_models_agree() {
         "host ↔ core weights round trip, mass included"
     );
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let n = 16;
     let states: Vec<State> = (0..n)
         .map(|_| train_common::random_state(&mut rng, 1.0))
         .collect();
@@ -232,4 +239,117 @@ fn host_network_jacobians_match_finite_differences() {
             vjp[i]
         );
     }
+}
+
+/// The trainer's fast loss (heads fused for small batches, J⁻¹(q) and the heads evaluated once
+/// per state and shared by the velocities and the next RK4 stage) equals the plain reference
+/// built from the model's methods — the value and every tensor's gradient — for a small batch
+/// (fused heads) and a large one (heads apart).
+#[test]
+fn fast_training_loss_matches_the_reference_ops() {
+    use host_train::train::data::{self, RealizationInfo, Window, Windows};
+    use host_train::train::r#loop::{batch_loss, batch_loss_reference};
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let n_real = 3;
+    let windows: Vec<Window> = (0..1100)
+        .map(|i| Window {
+            states: (0..5)
+                .map(|_| train_common::random_state(&mut rng, 0.5))
+                .collect(),
+            u: (0..4)
+                .map(|_| train_common::random_control(&mut rng).into())
+                .collect(),
+            realization: i % n_real,
+        })
+        .collect();
+    let data = Windows {
+        windows,
+        sample_hz: 240.0,
+        window_len: 5,
+        mass_kg: 0.034,
+        manifest_mass_kg: 0.034,
+        vehicle: Default::default(),
+        realizations: (0..n_real)
+            .map(|j| RealizationInfo {
+                file: format!("r{j}"),
+                wind_m_s2: None,
+                rotor_efficiency: None,
+                disturbance_free: false,
+                windows: 0,
+            })
+            .collect(),
+    };
+    let ad = Device::flex().autodiff();
+    let c = Consts::new(&ad, data.mass_kg);
+    let w = weights();
+    let mut a: Vec<f32> = Vec::new();
+    for _ in 0..n_real * FEATURES {
+        a.push(rng.gen_range(-0.5..0.5));
+    }
+    for n in [64usize, 1100] {
+        let ids: Vec<usize> = (0..n).collect();
+        let b = data::batch(&data, &ids, &ad);
+        let run = |reference: bool| {
+            let mut leaves = TModel::from_core(&w, &ad).tensors();
+            leaves.push(tensor2(a.clone(), [n_real, FEATURES], &ad));
+            let leaves: Vec<Tensor<2>> = leaves.into_iter().map(|l| l.require_grad()).collect();
+            let model = TModel::from_tensors(&leaves[..18]);
+            let f = if reference {
+                batch_loss_reference
+            } else {
+                batch_loss
+            };
+            let loss = f(&model, &c, leaves[18].clone(), &b, 1.0 / 240.0, 50.0);
+            let grads = loss.backward();
+            let g: Vec<Vec<f32>> = leaves
+                .iter()
+                .map(|l| l.grad(&grads).map(|g| to_vec(&g)).unwrap_or_default())
+                .collect();
+            (to_vec(&loss.inner())[0], g)
+        };
+        let (l_fast, g_fast) = run(false);
+        let (l_ref, g_ref) = run(true);
+        assert!(l_ref.is_finite() && l_ref > 0.0, "batch {n}: loss {l_ref}");
+        assert!(
+            (l_fast - l_ref).abs() <= 1e-4 * l_ref,
+            "batch {n}: loss {l_fast} vs {l_ref}"
+        );
+        for (k, (gf, gr)) in g_fast.iter().zip(&g_ref).enumerate() {
+            assert!(!gr.is_empty(), "batch {n}: tensor {k} has no gradient");
+            let e = rel_err(gf, gr);
+            assert!(e < 1e-3, "batch {n}: gradient of tensor {k} off by {e}");
+        }
+    }
+}
+
+/// A minibatch split over the cores (one autodiff graph per shard, gradients averaged by shard
+/// size) gives the whole minibatch's loss and gradients, on collected data.
+#[test]
+fn split_minibatch_gradients_equal_the_whole_batch() {
+    use host_train::collect::{collect, CollectConfig};
+    use host_train::train::{data, r#loop::initial_gradients, TrainConfig};
+    let dir = train_common::scratch("split-grads");
+    let cc = CollectConfig {
+        realizations: 2,
+        windows: 150,
+        poses: 2,
+        ..CollectConfig::default()
+    };
+    collect(&dir, &cc).expect("collect");
+    let cfg = TrainConfig::default();
+    let windows = data::load(&dir, cfg.window).expect("load");
+    let ids: Vec<usize> = (0..windows.windows.len()).collect();
+    assert!(ids.len() >= 256, "{} windows", ids.len());
+    let (l_split, g_split) = initial_gradients(&cfg, &windows, &ids, true);
+    let (l_whole, g_whole) = initial_gradients(&cfg, &windows, &ids, false);
+    assert!(
+        (l_split - l_whole).abs() <= 1e-5 * l_whole,
+        "loss {l_split} vs {l_whole}"
+    );
+    for (k, (a, b)) in g_split.iter().zip(&g_whole).enumerate() {
+        assert!(!b.is_empty(), "tensor {k} has no gradient");
+        let e = rel_err(a, b);
+        assert!(e < 1e-4, "gradient of tensor {k} off by {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -304,10 +304,10 @@ pub fn train_blackbox(
             };
             let loss = model.loss(&b, &fixed, dt, cfg.vel_weight);
             let grads = loss.backward();
-            let g: Vec<Tensor<2>> = leaves
+            let g: Vec<Option<Tensor<2>>> = leaves
                 .iter()
                 .zip(params.iter())
-                .map(|(l, p)| l.grad(&grads).unwrap_or_else(|| p.zeros_like()))
+                .map(|(l, p)| Some(l.grad(&grads).unwrap_or_else(|| p.zeros_like())))
                 .collect();
             if f64::from(to_vec(&loss.inner())[0]).is_finite() {
                 adam.step(&mut params, &g, &vec![lr; g.len()]);

@@ -4,7 +4,10 @@
 
 use super::data::StateBatch;
 use super::data::{self, Batch, Windows};
-use super::model::{to_vec, window_loss, Consts, Forcing, TModel};
+use super::model::{
+    rk4_with, to_phase_with, to_vec, velocities_with, window_loss, Consts, Forcing, FusedHeads,
+    TModel,
+};
 use super::TrainConfig;
 use burn::tensor::{Device, Tensor, TensorData};
 use hamflight::model::{ModelWeights, FEATURES};
@@ -78,9 +81,62 @@ pub fn batch_loss(
     dt_s: f32,
     vel_weight: f32,
 ) -> Tensor<1> {
+    // Each state's head outputs computed once: they serve the velocities read there and the
+    // next step's first RK4 stage. Small batches run the three heads as one network (fewer
+    // ops); large ones apart (the fused layers' zero blocks cost more than the ops saved).
+    let fused = (b.len <= FUSE_MAX_BATCH).then(|| FusedHeads::new(model));
+    let head = fused.as_ref().map_or(&model.inertia, |f| f.inertia_head());
+    let nets_at = |rot: &Tensor<3>| match &fused {
+        Some(f) => f.nets(c, rot),
+        None => model.nets(c, rot),
+    };
+    let s0 = &b.states[0];
+    let n0 = nets_at(&s0.rot);
+    let mut x = to_phase_with(
+        c,
+        &n0.inertia,
+        s0.p.clone(),
+        s0.rot.clone(),
+        s0.v.clone(),
+        s0.w.clone(),
+    );
+    // a_j is selected once per batch (one node in the graph); only the command changes per step.
+    let mut forcing: Option<Forcing> = None;
+    let mut nets = Some(n0);
+    let preds = b.u.iter().map(|u| {
+        let f = match forcing.take() {
+            None => Forcing::new(c, u.clone(), a_all.clone(), b.realization.clone()),
+            Some(prev) => prev.with_control(c, u.clone()),
+        };
+        let n_x = nets.take().unwrap_or_else(|| nets_at(&x.rot));
+        x = rk4_with(c, &nets_at, head, &x, n_x, &f, dt_s);
+        let n = nets_at(&x.rot);
+        let (v, w) = velocities_with(c, &n.inertia, &x);
+        nets = Some(n);
+        forcing = Some(f);
+        StateBatch {
+            p: x.p.clone(),
+            rot: x.rot.clone(),
+            v,
+            w,
+        }
+    });
+    window_loss(preds, b, vel_weight)
+}
+
+/// [`batch_loss`] by the model's plain methods: each head on its own and J⁻¹(q) evaluated
+/// again wherever it is needed. The same value (to rounding); kept as the reference the fused
+/// path is tested against, and timed by `host-train bench-train --reference`.
+pub fn batch_loss_reference(
+    model: &TModel,
+    c: &Consts,
+    a_all: Tensor<2>,
+    b: &Batch,
+    dt_s: f32,
+    vel_weight: f32,
+) -> Tensor<1> {
     let s0 = &b.states[0];
     let mut x = model.to_phase(c, s0.p.clone(), s0.rot.clone(), s0.v.clone(), s0.w.clone());
-    // a_j is selected once per batch (one node in the graph); only the command changes per step.
     let mut forcing: Option<Forcing> = None;
     let preds = b.u.iter().map(|u| {
         let f = match forcing.take() {
@@ -140,14 +196,17 @@ impl Adam {
         }
     }
 
-    /// One Adam step (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) with a learning rate per tensor.
-    pub fn step(&mut self, params: &mut [Tensor<2>], grads: &[Tensor<2>], lrs: &[f64]) {
+    /// One Adam step (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) with a learning rate per tensor; a
+    /// tensor without a gradient (`None`) is left as it is.
+    pub fn step(&mut self, params: &mut [Tensor<2>], grads: &[Option<Tensor<2>>], lrs: &[f64]) {
         self.t += 1;
         let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8f64);
         let c1 = 1.0 - b1.powi(self.t);
         let c2 = 1.0 - b2.powi(self.t);
         for i in 0..params.len() {
-            let g = grads[i].clone();
+            let Some(g) = grads[i].clone() else {
+                continue;
+            };
             self.m[i] = self.m[i].clone().mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
             self.v[i] = self.v[i].clone().mul_scalar(b2) + g.square().mul_scalar(1.0 - b2);
             let mhat = self.m[i].clone().div_scalar(c1);
@@ -161,7 +220,229 @@ impl Adam {
 /// Index in [`TModel::tensors`] of the W head's input-layer weight (J⁻¹ and g heads take 6 each).
 const FEATURE_INPUT_WEIGHT: usize = 12;
 
-/// Trains on `train` windows, validating on `heldout` after every epoch.
+/// The learning rate of main-stage epoch `epoch` (1-based) of `epochs`: a linear warm-up over
+/// `warmup` epochs to `lr`, then a cosine decay to lr / 20 at the last epoch.
+pub fn lr_at(lr: f64, epoch: usize, epochs: usize, warmup: usize) -> f64 {
+    if epoch <= warmup {
+        return lr * epoch as f64 / (warmup + 1) as f64;
+    }
+    let span = epochs.saturating_sub(warmup).max(1) as f64;
+    let frac = (epoch - warmup - 1) as f64 / span;
+    lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * frac).cos()))
+}
+
+/// The training state shared by the stages: the tensors, Adam, the minibatch RNG.
+struct Trainer<'a> {
+    cfg: &'a TrainConfig,
+    data: &'a Windows,
+    ad: Device,
+    c_ad: Consts,
+    dt_s: f32,
+    params: Vec<Tensor<2>>,
+    n_net: usize,
+    adam: Adam,
+    rng: ChaCha8Rng,
+    /// [M,1]: 0 for the disturbance-free realizations (a_j pinned), 1 otherwise.
+    a_mask: Option<Tensor<2>>,
+    /// Use [`batch_loss_reference`] (benchmarks only).
+    reference: bool,
+}
+
+impl Trainer<'_> {
+    /// One pass over `ids` in shuffled minibatches with learning rate `lr` (the a_j with
+    /// `lr · a_lr_scale`). Returns the mean training loss per window.
+    fn epoch(&mut self, ids: &[usize], lr: f64) -> f64 {
+        let cfg = self.cfg;
+        let mut lrs = vec![lr; self.params.len()];
+        lrs[self.n_net] = lr * cfg.a_lr_scale;
+        let mut order = ids.to_vec();
+        order.shuffle(&mut self.rng);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for chunk in order.chunks(cfg.batch.max(1)) {
+            let (lv, g) = self.loss_and_grads(chunk);
+            if lv.is_finite() {
+                self.adam.step(&mut self.params, &g, &lrs);
+                if let Some(m) = &self.a_mask {
+                    self.params[self.n_net] = self.params[self.n_net].clone() * m.clone();
+                }
+                if cfg.feature_decay > 0.0 {
+                    let p = &mut self.params[FEATURE_INPUT_WEIGHT];
+                    *p = p.clone().mul_scalar(1.0 - lr * cfg.feature_decay);
+                }
+                sum += lv * chunk.len() as f64;
+                count += chunk.len();
+            }
+        }
+        sum / count.max(1) as f64
+    }
+
+    /// The mean loss over the windows `ids` and its gradient for every tensor, on one shard.
+    fn shard_loss_and_grads(&self, ids: &[usize]) -> Shard {
+        let b = data::batch(self.data, ids, &self.ad);
+        let leaves: Vec<Tensor<2>> = self
+            .params
+            .iter()
+            .map(|p| p.clone().autodiff().require_grad())
+            .collect();
+        let model = TModel::from_tensors(&leaves[..self.n_net]);
+        let loss_fn = if self.reference {
+            batch_loss_reference
+        } else {
+            batch_loss
+        };
+        let loss = loss_fn(
+            &model,
+            &self.c_ad,
+            leaves[self.n_net].clone(),
+            &b,
+            self.dt_s,
+            self.cfg.vel_weight,
+        );
+        let grads = loss.backward();
+        let g: Vec<Option<Tensor<2>>> = leaves.iter().map(|l| l.grad(&grads)).collect();
+        (f64::from(to_vec(&loss.inner())[0]), g)
+    }
+
+    /// The mean loss over the windows `ids` and its gradient for every tensor. A large
+    /// minibatch is split into one shard per core, each with its own autodiff graph (the flex
+    /// backend runs an op on one core), and the shards' gradients are averaged, weighted by
+    /// their sizes: the whole batch's gradient, to rounding. Measured with `host-train
+    /// bench-train` on 2 cores: 1.15 → 0.84 s per epoch at batch 128, 0.93 → 0.58 at 256,
+    /// 0.76 → 0.39 at 7,776. (On a machine whose other core is busy the shards wait on each
+    /// other and on the autodiff registry's lock, and it is slower at small batches.)
+    fn loss_and_grads(&self, ids: &[usize]) -> Shard {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if cores < 2 || ids.len() < SHARD_MIN_BATCH || self.reference {
+            return self.shard_loss_and_grads(ids);
+        }
+        let per = ids.len().div_ceil(cores);
+        let parts: Vec<(usize, Shard)> = std::thread::scope(|s| {
+            let handles: Vec<_> = ids
+                .chunks(per)
+                .map(|part| s.spawn(move || (part.len(), self.shard_loss_and_grads(part))))
+                .collect();
+            handles.into_iter().filter_map(|h| h.join().ok()).collect()
+        });
+        let n = ids.len() as f64;
+        let mut loss = 0.0;
+        let mut grads: Vec<Option<Tensor<2>>> = vec![None; self.params.len()];
+        for (len, (l, g)) in parts {
+            let w = len as f64 / n;
+            loss += l * w;
+            for (acc, gi) in grads.iter_mut().zip(g) {
+                let Some(gi) = gi else { continue };
+                let gi = gi.mul_scalar(w);
+                *acc = Some(match acc.take() {
+                    Some(a) => a + gi,
+                    None => gi,
+                });
+            }
+        }
+        (loss, grads)
+    }
+}
+
+/// A shard's mean loss and the gradient of every tensor.
+type Shard = (f64, Vec<Option<Tensor<2>>>);
+
+/// The smallest minibatch [`Trainer::loss_and_grads`] splits over the cores (64 windows a
+/// shard on 2 cores).
+const SHARD_MIN_BATCH: usize = 128;
+
+/// The largest minibatch [`batch_loss`] runs the heads fused for (measured with
+/// `host-train bench-train`: fused is faster at 128 and 256, slower at 7,776).
+const FUSE_MAX_BATCH: usize = 1024;
+
+impl<'a> Trainer<'a> {
+    fn new(cfg: &'a TrainConfig, data: &'a Windows, device: &Device) -> Self {
+        let ad = device.clone().autodiff();
+        let n_real = data.realizations.len().max(1);
+        let init = init_weights(cfg.seed, cfg.init_out_gain);
+        let mut params = TModel::from_core(&init, device).tensors();
+        params.push(Tensor::zeros([n_real, FEATURES], device));
+        let n_net = params.len() - 1;
+        // Disturbance-free realizations keep a_j = 0: their rows are masked after every step.
+        let calm: Vec<bool> = (0..n_real)
+            .map(|j| data.realizations.get(j).is_some_and(|r| r.disturbance_free))
+            .collect();
+        let a_mask = calm.contains(&true).then(|| {
+            let m: Vec<f32> = calm.iter().map(|&c| if c { 0.0 } else { 1.0 }).collect();
+            Tensor::from_data(TensorData::new(m, [n_real, 1]), device)
+        });
+        Self {
+            cfg,
+            data,
+            c_ad: Consts::new(&ad, data.mass_kg),
+            ad,
+            dt_s: 1.0 / data.sample_hz,
+            adam: Adam::new(&params),
+            params,
+            n_net,
+            rng: ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_add(1)),
+            a_mask,
+            reference: false,
+        }
+    }
+}
+
+/// Wall time and process CPU time (s, all threads; `None` where /proc is not readable) of
+/// each of `epochs` training epochs over `ids` at `cfg`'s batch size and learning rate
+/// (forward, backward and Adam; no validation): `host-train bench-train`. `reference` times
+/// [`batch_loss_reference`] instead of [`batch_loss`].
+pub fn time_epochs(
+    cfg: &TrainConfig,
+    data: &Windows,
+    ids: &[usize],
+    epochs: usize,
+    reference: bool,
+) -> Vec<(f64, Option<f64>)> {
+    let mut t = Trainer::new(cfg, data, &Device::flex());
+    t.reference = reference;
+    (0..epochs)
+        .map(|_| {
+            let (t0, c0) = (Instant::now(), process_cpu_s());
+            t.epoch(ids, cfg.lr);
+            let cpu = process_cpu_s().zip(c0).map(|(c1, c0)| c1 - c0);
+            (t0.elapsed().as_secs_f64(), cpu)
+        })
+        .collect()
+}
+
+/// The mean loss over the windows `ids` and every tensor's gradient (flattened) at `cfg`'s
+/// initial weights, with the minibatch split over the cores as in training (`split`) or whole:
+/// for the test that the two agree.
+pub fn initial_gradients(
+    cfg: &TrainConfig,
+    data: &Windows,
+    ids: &[usize],
+    split: bool,
+) -> (f64, Vec<Vec<f32>>) {
+    let t = Trainer::new(cfg, data, &Device::flex());
+    let (loss, g) = if split {
+        t.loss_and_grads(ids)
+    } else {
+        t.shard_loss_and_grads(ids)
+    };
+    let g = g
+        .iter()
+        .map(|g| g.as_ref().map(to_vec).unwrap_or_default())
+        .collect();
+    (loss, g)
+}
+
+/// User + system CPU time of this process (s) from `/proc/self/stat` (Linux, 100 ticks/s).
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesized command name: state is field 3, utime 14, stime 15.
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok());
+    Some((ticks(11)? + ticks(12)?) / 100.0)
+}
+
+/// Trains on `train` windows, validating on `heldout` after every epoch: `cfg.epochs` epochs
+/// ([`lr_at`]: warm-up, cosine decay), stopping early after `cfg.patience` epochs without a
+/// better held-out loss; the best epoch's tensors are kept.
 pub fn train(
     cfg: &TrainConfig,
     data: &Windows,
@@ -170,30 +451,10 @@ pub fn train(
     quiet: bool,
 ) -> Trained {
     let device = Device::flex();
-    let ad = device.clone().autodiff();
     let c_plain = Consts::new(&device, data.mass_kg);
-    let c_ad = Consts::new(&ad, data.mass_kg);
     let dt_s = 1.0 / data.sample_hz;
-    let n_real = data.realizations.len().max(1);
-    let init = init_weights(cfg.seed, cfg.init_out_gain);
-    let mut params = TModel::from_core(&init, &device).tensors();
-    params.push(Tensor::zeros([n_real, FEATURES], &device));
-    let n_net = params.len() - 1;
-    // Disturbance-free realizations keep a_j = 0: their rows are masked after every step.
-    let pinned: Vec<f32> = (0..n_real)
-        .map(|j| {
-            let free = data.realizations.get(j).is_some_and(|r| r.disturbance_free);
-            if free {
-                0.0
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let any_pinned = pinned.contains(&0.0);
-    let a_mask: Tensor<2> = Tensor::from_data(TensorData::new(pinned, [n_real, 1]), &device);
-    let mut adam = Adam::new(&params);
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_add(1));
+    let mut t = Trainer::new(cfg, data, &device);
+    let n_net = t.n_net;
     let val = |params: &[Tensor<2>]| {
         let model = TModel::from_tensors(&params[..n_net]);
         eval_loss(
@@ -206,7 +467,7 @@ pub fn train(
             cfg.vel_weight,
         )
     };
-    let initial_val_loss = val(&params);
+    let initial_val_loss = val(&t.params);
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -220,64 +481,39 @@ pub fn train(
     bar.set_message(format!("val {initial_val_loss:.3e}"));
     let start = Instant::now();
     let mut curve = Vec::with_capacity(cfg.epochs);
-    let mut order = train.to_vec();
-    for epoch in 1..=cfg.epochs {
-        // Cosine decay from lr to lr / 20.
-        let frac = (epoch - 1) as f64 / cfg.epochs.max(1) as f64;
-        let lr = cfg.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * frac).cos()));
-        let mut lrs = vec![lr; params.len()];
-        lrs[n_net] = lr * cfg.a_lr_scale;
-        order.shuffle(&mut rng);
-        let (mut sum, mut count) = (0.0, 0usize);
-        for chunk in order.chunks(cfg.batch.max(1)) {
-            let b = data::batch(data, chunk, &ad);
-            let leaves: Vec<Tensor<2>> = params
-                .iter()
-                .map(|p| p.clone().autodiff().require_grad())
-                .collect();
-            let model = TModel::from_tensors(&leaves[..n_net]);
-            let loss = batch_loss(
-                &model,
-                &c_ad,
-                leaves[n_net].clone(),
-                &b,
-                dt_s,
-                cfg.vel_weight,
-            );
-            let grads = loss.backward();
-            let g: Vec<Tensor<2>> = leaves
-                .iter()
-                .zip(params.iter())
-                .map(|(l, p)| l.grad(&grads).unwrap_or_else(|| p.zeros_like()))
-                .collect();
-            let lv = f64::from(to_vec(&loss.inner())[0]);
-            if lv.is_finite() {
-                adam.step(&mut params, &g, &lrs);
-                if any_pinned {
-                    params[n_net] = params[n_net].clone() * a_mask.clone();
-                }
-                if cfg.feature_decay > 0.0 {
-                    let p = &mut params[FEATURE_INPUT_WEIGHT];
-                    *p = p.clone().mul_scalar(1.0 - lr * cfg.feature_decay);
-                }
-                sum += lv * chunk.len() as f64;
-                count += chunk.len();
-            }
-        }
-        let train_loss = sum / count.max(1) as f64;
-        let val_loss = val(&params);
+    let record = |curve: &mut Vec<EpochStats>, train_loss: f64, val_loss: f64| {
         curve.push(EpochStats {
-            epoch,
+            epoch: curve.len() + 1,
             train_loss,
             val_loss,
             elapsed_s: start.elapsed().as_secs_f64(),
         });
         bar.set_message(format!("loss {train_loss:.3e} val {val_loss:.3e}"));
         bar.inc(1);
+    };
+    let mut best = (f64::INFINITY, t.params.clone());
+    let mut since_best = 0usize;
+    for epoch in 1..=cfg.epochs {
+        let lr = lr_at(cfg.lr, epoch, cfg.epochs, cfg.warmup_epochs);
+        let train_loss = t.epoch(train, lr);
+        let val_loss = val(&t.params);
+        record(&mut curve, train_loss, val_loss);
+        if val_loss < best.0 {
+            best = (val_loss, t.params.clone());
+            since_best = 0;
+        } else {
+            since_best += 1;
+            if cfg.patience > 0 && since_best >= cfg.patience {
+                break;
+            }
+        }
+    }
+    if best.0.is_finite() {
+        t.params = best.1;
     }
     bar.finish();
-    let model = TModel::from_tensors(&params[..n_net]);
-    let a_flat = to_vec(&params[n_net]);
+    let model = TModel::from_tensors(&t.params[..n_net]);
+    let a_flat = to_vec(&t.params[n_net]);
     let a = a_flat
         .chunks_exact(FEATURES)
         .map(|c| std::array::from_fn(|k| c[k]))

@@ -22,6 +22,8 @@ pub struct TMlp {
     pub w: [Tensor<2>; 3],
     /// Biases `[1, out]`.
     pub b: [Tensor<2>; 3],
+    /// The weights transposed, once per batch for the VJP ([`TMlp::with_transposes`]).
+    pub wt: Option<[Tensor<2>; 3]>,
 }
 
 /// The hidden activations of one forward pass (kept for the JVP/VJP).
@@ -58,9 +60,20 @@ impl TMlp {
     pub fn vjp(&self, t: &Trace, dy: Tensor<2>) -> Tensor<2> {
         let s0 = t.h0.clone().square().neg().add_scalar(1.0);
         let s1 = t.h1.clone().square().neg().add_scalar(1.0);
-        let g1 = s1 * dy.matmul(self.w[2].clone().transpose());
-        let g0 = s0 * g1.matmul(self.w[1].clone().transpose());
-        g0.matmul(self.w[0].clone().transpose())
+        let wt = |k: usize| match &self.wt {
+            Some(wt) => wt[k].clone(),
+            None => self.w[k].clone().transpose(),
+        };
+        let g1 = s1 * dy.matmul(wt(2));
+        let g0 = s0 * g1.matmul(wt(1));
+        g0.matmul(wt(0))
+    }
+
+    /// The same network with its transposed weights kept, so that each VJP skips three
+    /// transposes (one graph node each per call in training).
+    pub fn with_transposes(mut self) -> Self {
+        self.wt = Some(self.w.clone().map(|w| w.transpose()));
+        self
     }
 
     /// All six tensors, in `[w0, b0, w1, b1, w2, b2]` order.
@@ -80,6 +93,7 @@ impl TMlp {
         Self {
             w: [t[0].clone(), t[2].clone(), t[4].clone()],
             b: [t[1].clone(), t[3].clone(), t[5].clone()],
+            wt: None,
         }
     }
 
@@ -109,6 +123,7 @@ impl TMlp {
         Self {
             w: [w0, w1, w2],
             b: [b0, b1, b2],
+            wt: None,
         }
     }
 
@@ -151,8 +166,8 @@ pub struct Consts {
     l_map_t: Tensor<2>,
     /// `[3, 9]`: ω → row-major ω̂.
     hat_map: Tensor<2>,
-    /// `[1, 3, 3]` identity.
-    eye: Tensor<3>,
+    /// `[1, 3, 3]` identity times INERTIA_INV_EPS.
+    eps_eye: Tensor<3>,
     /// `[1, 6]` row scale of g.
     wrench_scale: Tensor<2>,
     /// `[1, 4]` 1 / CONTROL_SCALE.
@@ -189,7 +204,9 @@ impl Consts {
             l_map: Tensor::from_data(TensorData::new(l, [6, 9]), device),
             l_map_t: Tensor::from_data(TensorData::new(lt, [9, 6]), device),
             hat_map: Tensor::from_data(TensorData::new(h, [3, 9]), device),
-            eye: Tensor::<2>::eye(3, device).reshape([1, 3, 3]),
+            eps_eye: Tensor::<2>::eye(3, device)
+                .reshape([1, 3, 3])
+                .mul_scalar(INERTIA_INV_EPS),
             wrench_scale: Tensor::from_data(TensorData::new(WRENCH_SCALE.to_vec(), [1, 6]), device),
             control_inv_scale: Tensor::from_data(TensorData::new(cinv, [1, 4]), device),
             mass_kg,
@@ -197,16 +214,56 @@ impl Consts {
     }
 }
 
+/// Batch size from which the products of small matrices below are broadcast multiplies and
+/// sums instead of batched matmuls: the flex backend runs a batched matmul as one gemm call
+/// per matrix, a fixed cost per window, while the broadcast form takes two more ops. Measured
+/// with `host-train bench-train`: full batch (shards of 3,888) 0.345 → 0.269 s per epoch,
+/// batch 128 (shards of 64) 0.79 → 0.95 s.
+const BROADCAST_MIN_BATCH: usize = 1024;
+
+/// M[B,r,k] x[B,k] → [B,r].
+pub fn mat_vec_n(m: Tensor<3>, x: Tensor<2>) -> Tensor<2> {
+    let [b, r, k] = m.dims();
+    if b < BROADCAST_MIN_BATCH {
+        return m.matmul(x.reshape([b, k, 1])).reshape([b, r]);
+    }
+    (m * x.reshape([b, 1, k])).sum_dim(2).reshape([b, r])
+}
+
 /// M[B,3,3] v[B,3] → [B,3].
 pub fn matvec(m: Tensor<3>, v: Tensor<2>) -> Tensor<2> {
-    let b = v.dims()[0];
-    m.matmul(v.reshape([b, 3, 1])).reshape([b, 3])
+    mat_vec_n(m, v)
+}
+
+/// A Bᵀ for A[B,3,3], B[B,3,3]: (A Bᵀ)ᵢⱼ = Σₖ Aᵢₖ Bⱼₖ.
+pub fn mat_mat_t(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
+    let n = a.dims()[0];
+    if n < BROADCAST_MIN_BATCH {
+        return a.matmul(b.swap_dims(1, 2));
+    }
+    (a.reshape([n, 3, 1, 3]) * b.reshape([n, 1, 3, 3]))
+        .sum_dim(3)
+        .reshape([n, 3, 3])
+}
+
+/// A B for A[B,3,3], B[B,3,3].
+pub fn mat_mat(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
+    let n = a.dims()[0];
+    if n < BROADCAST_MIN_BATCH {
+        return a.matmul(b);
+    }
+    (a.reshape([n, 3, 3, 1]) * b.reshape([n, 1, 3, 3]))
+        .sum_dim(2)
+        .reshape([n, 3, 3])
 }
 
 /// Mᵀ v for M[B,3,3], v[B,3].
 pub fn mat_t_vec(m: Tensor<3>, v: Tensor<2>) -> Tensor<2> {
     let b = v.dims()[0];
-    v.reshape([b, 1, 3]).matmul(m).reshape([b, 3])
+    if b < BROADCAST_MIN_BATCH {
+        return v.reshape([b, 1, 3]).matmul(m).reshape([b, 3]);
+    }
+    (m * v.reshape([b, 3, 1])).sum_dim(1).reshape([b, 3])
 }
 
 /// Row-major hat map of ω [B,3] → [B,3,3].
@@ -234,6 +291,103 @@ pub struct InertiaEval {
     pub l: Tensor<3>,
     /// J⁻¹ [B,3,3].
     pub jinv: Tensor<3>,
+}
+
+/// J⁻¹ = s_J (L Lᵀ + ε I) from the J⁻¹ head's trace.
+fn inertia_from_trace(c: &Consts, trace: Trace) -> InertiaEval {
+    let b = trace.y.dims()[0];
+    let l = trace.y.clone().matmul(c.l_map.clone()).reshape([b, 3, 3]);
+    let jinv = (mat_mat_t(l.clone(), l.clone()) + c.eps_eye.clone())
+        .mul_scalar(INERTIA_INV_SCALE_PER_KG_M2);
+    InertiaEval { trace, l, jinv }
+}
+
+/// The three heads evaluated at one batch of rotations.
+pub struct Nets {
+    /// J⁻¹ and its head's trace.
+    pub inertia: InertiaEval,
+    /// The g head's raw output [B, 24].
+    pub gain: Tensor<2>,
+    /// The W head's raw output [B, 6p].
+    pub features: Tensor<2>,
+}
+
+/// The three heads as one network for training: layer 0 side by side `[9, 3H]`, layers 1 and
+/// 2 block-diagonal, so a batch of rotations takes one pass of three matmuls instead of nine
+/// (the flex backend's time goes to the number of small ops, not their size). Built once per
+/// batch from the heads' tensors (the blocks keep their gradients).
+pub struct FusedHeads {
+    net: TMlp,
+    /// The J⁻¹ head alone (with its transposes), for the VJP of ∂H/∂q.
+    inertia: TMlp,
+    hidden: usize,
+    out: [usize; 3],
+}
+
+impl FusedHeads {
+    /// Fuses `m`'s heads.
+    pub fn new(m: &TModel) -> Self {
+        let heads = [&m.inertia, &m.gain, &m.disturbance];
+        let hidden = m.inertia.w[0].dims()[1];
+        let out = heads.map(|h| h.w[2].dims()[1]);
+        let device = m.inertia.w[0].device();
+        let block_diag = |k: usize, widths: [usize; 3]| {
+            let rows: Vec<Tensor<2>> = (0..3)
+                .map(|i| {
+                    let r = heads[i].w[k].dims()[0];
+                    let blocks: Vec<Tensor<2>> = (0..3)
+                        .map(|j| {
+                            if i == j {
+                                heads[i].w[k].clone()
+                            } else {
+                                Tensor::zeros([r, widths[j]], &device)
+                            }
+                        })
+                        .collect();
+                    Tensor::cat(blocks, 1)
+                })
+                .collect();
+            Tensor::cat(rows, 0)
+        };
+        let net = TMlp {
+            w: [
+                Tensor::cat(heads.iter().map(|h| h.w[0].clone()).collect(), 1),
+                block_diag(1, [hidden; 3]),
+                block_diag(2, out),
+            ],
+            b: [0, 1, 2].map(|k| Tensor::cat(heads.iter().map(|h| h.b[k].clone()).collect(), 1)),
+            wt: None,
+        };
+        Self {
+            net,
+            inertia: m.inertia.clone().with_transposes(),
+            hidden,
+            out,
+        }
+    }
+
+    /// The three heads at a batch of rotations (what [`TModel::nets`] gives, in one pass).
+    pub fn nets(&self, c: &Consts, rot: &Tensor<3>) -> Nets {
+        let b = rot.dims()[0];
+        let t = self.net.forward(rot.clone().reshape([b, 9]));
+        let [oi, og, od] = self.out;
+        let h = self.hidden;
+        let trace = Trace {
+            h0: t.h0.narrow(1, 0, h),
+            h1: t.h1.narrow(1, 0, h),
+            y: t.y.clone().narrow(1, 0, oi),
+        };
+        Nets {
+            inertia: inertia_from_trace(c, trace),
+            gain: t.y.clone().narrow(1, oi, og),
+            features: t.y.narrow(1, oi + og, od),
+        }
+    }
+
+    /// The J⁻¹ head (for [`TModel::dh_dr_with`]).
+    pub fn inertia_head(&self) -> &TMlp {
+        &self.inertia
+    }
 }
 
 /// The phase-space state integrated in training: (q, 𝔭) with p, R, 𝔭_v, 𝔭_ω kept apart.
@@ -327,11 +481,18 @@ impl TModel {
     pub fn inertia_inv(&self, c: &Consts, rot: &Tensor<3>) -> InertiaEval {
         let b = rot.dims()[0];
         let trace = self.inertia.forward(rot.clone().reshape([b, 9]));
-        let l = trace.y.clone().matmul(c.l_map.clone()).reshape([b, 3, 3]);
-        let jinv = (l.clone().matmul(l.clone().swap_dims(1, 2))
-            + c.eye.clone().mul_scalar(INERTIA_INV_EPS))
-        .mul_scalar(INERTIA_INV_SCALE_PER_KG_M2);
-        InertiaEval { trace, l, jinv }
+        inertia_from_trace(c, trace)
+    }
+
+    /// The three heads at a batch of rotations, one forward pass each.
+    pub fn nets(&self, c: &Consts, rot: &Tensor<3>) -> Nets {
+        let b = rot.dims()[0];
+        let x = rot.clone().reshape([b, 9]);
+        Nets {
+            inertia: self.inertia_inv(c, rot),
+            gain: self.gain.forward(x.clone()).y,
+            features: self.disturbance.forward(x).y,
+        }
     }
 
     /// d/dt J⁻¹ along Ṙ (a JVP of the head), [B,3,3].
@@ -348,14 +509,7 @@ impl TModel {
 
     /// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω, rows i, [B,3,3] (a VJP of the head).
     pub fn dh_dr(&self, c: &Consts, ev: &InertiaEval, pw: Tensor<2>) -> Tensor<3> {
-        let b = pw.dims()[0];
-        let y = mat_t_vec(ev.l.clone(), pw.clone());
-        let outer = pw.reshape([b, 3, 1]) * y.reshape([b, 1, 3]);
-        let dh_dl = outer
-            .reshape([b, 9])
-            .matmul(c.l_map_t.clone())
-            .mul_scalar(INERTIA_INV_SCALE_PER_KG_M2);
-        self.inertia.vjp(&ev.trace, dh_dl).reshape([b, 3, 3])
+        dh_dr_with(c, &self.inertia, ev, pw)
     }
 
     /// g(q) u as a body force and torque ([B,3] each), from u / CONTROL_SCALE.
@@ -366,13 +520,8 @@ impl TModel {
         u_norm: Tensor<2>,
     ) -> (Tensor<2>, Tensor<2>) {
         let b = rot.dims()[0];
-        let o = self
-            .gain
-            .forward(rot.clone().reshape([b, 9]))
-            .y
-            .reshape([b, 6, 4]);
-        let gu = o.matmul(u_norm.reshape([b, 4, 1])).reshape([b, 6]) * c.wrench_scale.clone();
-        (gu.clone().narrow(1, 0, 3), gu.narrow(1, 3, 3))
+        let o = self.gain.forward(rot.clone().reshape([b, 9])).y;
+        control_wrench_from(c, o, u_norm)
     }
 
     /// The feature head's raw output [B, 6, p].
@@ -399,36 +548,14 @@ impl TModel {
 
     /// d = W a as a body force and torque ([B,3] each).
     pub fn disturbance(&self, c: &Consts, rot: &Tensor<3>, a: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let o = self.feature_output(rot);
-        let [b, _, p] = o.dims();
-        let oa = o.matmul(a.reshape([b, p, 1])).reshape([b, 6]);
-        let n_world = oa.clone().narrow(1, 0, 3);
-        let force = mat_t_vec(rot.clone(), n_world).mul_scalar(c.mass_kg);
-        let torque = oa.narrow(1, 3, 3).mul_scalar(TORQUE_SCALE_NM);
-        (force, torque)
+        let b = rot.dims()[0];
+        let o = self.disturbance.forward(rot.clone().reshape([b, 9])).y;
+        disturbance_from(c, o, rot, a)
     }
 
     /// Paper eq. 1 in (q, 𝔭): the phase-space derivative, and the velocities (v, ω) at `x`.
     pub fn phase_rhs(&self, c: &Consts, x: &Phase, f: &Forcing) -> Phase {
-        let ev = self.inertia_inv(c, &x.rot);
-        let w = matvec(ev.jinv.clone(), x.pw.clone());
-        let v = x.pv.clone().div_scalar(c.mass_kg);
-        let (fu, tu) = self.control_wrench(c, &x.rot, f.u_norm.clone());
-        let (fd, td) = self.disturbance(c, &x.rot, f.a.clone());
-        let b = v.dims()[0];
-        // Rᵀ (m g e₃) = m g r₃.
-        let r3 = x.rot.clone().narrow(1, 2, 1).reshape([b, 3]);
-        let pv_dot =
-            x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(c.mass_kg * GRAVITY_M_S2) + fu + fd;
-        let dh = self.dh_dr(c, &ev, x.pw.clone());
-        let shape_torque = x.rot.clone().cross(dh, 2).sum_dim(1).reshape([b, 3]);
-        let pw_dot = x.pw.clone().cross(w.clone(), 1) + shape_torque + tu + td;
-        Phase {
-            p: matvec(x.rot.clone(), v),
-            rot: x.rot.clone().matmul(hat(c, w)),
-            pv: pv_dot,
-            pw: pw_dot,
-        }
+        phase_rhs_with(c, x, f, self.nets(c, &x.rot), &self.inertia)
     }
 
     /// The state derivative (ṗ, Ṙ, v̇, ω̇) of paper eq. 1 and 2 at a batch of states — what the
@@ -465,22 +592,12 @@ impl TModel {
         v: Tensor<2>,
         w: Tensor<2>,
     ) -> Phase {
-        let ev = self.inertia_inv(c, &rot);
-        Phase {
-            p,
-            rot,
-            pv: v.mul_scalar(c.mass_kg),
-            pw: matvec(invert_sym3(ev.jinv), w),
-        }
+        to_phase_with(c, &self.inertia_inv(c, &rot), p, rot, v, w)
     }
 
     /// 𝔭 → ζ: (v, ω) = (𝔭_v / m, J⁻¹(q) 𝔭_ω).
     pub fn velocities(&self, c: &Consts, x: &Phase) -> (Tensor<2>, Tensor<2>) {
-        let ev = self.inertia_inv(c, &x.rot);
-        (
-            x.pv.clone().div_scalar(c.mass_kg),
-            matvec(ev.jinv, x.pw.clone()),
-        )
+        velocities_with(c, &self.inertia_inv(c, &x.rot), x)
     }
 
     /// One RK4 step of `dt_s` in (q, 𝔭) with the forcing held constant.
@@ -489,7 +606,16 @@ impl TModel {
         let k2 = self.phase_rhs(c, &x.axpy(0.5 * dt_s, &k1), f);
         let k3 = self.phase_rhs(c, &x.axpy(0.5 * dt_s, &k2), f);
         let k4 = self.phase_rhs(c, &x.axpy(dt_s, &k3), f);
+        x.rk4_combine(&k1, &k2, &k3, &k4, dt_s)
+    }
+}
+
+impl Phase {
+    /// x + h/6 (k₁ + 2 k₂ + 2 k₃ + k₄).
+    fn rk4_combine(&self, k1: &Phase, k2: &Phase, k3: &Phase, k4: &Phase, dt_s: f32) -> Phase {
+        let x = self;
         let h6 = dt_s / 6.0;
+        let (k1, k2, k3, k4) = (k1.clone(), k2.clone(), k3.clone(), k4.clone());
         Phase {
             p: x.p.clone() + (k1.p + (k2.p + k3.p).mul_scalar(2.0) + k4.p).mul_scalar(h6),
             rot: x.rot.clone()
@@ -498,6 +624,112 @@ impl TModel {
             pw: x.pw.clone() + (k1.pw + (k2.pw + k3.pw).mul_scalar(2.0) + k4.pw).mul_scalar(h6),
         }
     }
+}
+
+/// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω with the J⁻¹ head `head` ([`TModel::dh_dr`]).
+pub fn dh_dr_with(c: &Consts, head: &TMlp, ev: &InertiaEval, pw: Tensor<2>) -> Tensor<3> {
+    let b = pw.dims()[0];
+
+    let y = mat_t_vec(ev.l.clone(), pw.clone());
+    let outer = pw.reshape([b, 3, 1]) * y.reshape([b, 1, 3]);
+    let dh_dl = outer
+        .reshape([b, 9])
+        .matmul(c.l_map_t.clone())
+        .mul_scalar(INERTIA_INV_SCALE_PER_KG_M2);
+    head.vjp(&ev.trace, dh_dl).reshape([b, 3, 3])
+}
+
+/// g u as a body force and torque from the g head's raw output [B, 24].
+fn control_wrench_from(c: &Consts, gain: Tensor<2>, u_norm: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    let b = gain.dims()[0];
+    let o = gain.reshape([b, 6, 4]);
+    let gu = mat_vec_n(o, u_norm) * c.wrench_scale.clone();
+    (gu.clone().narrow(1, 0, 3), gu.narrow(1, 3, 3))
+}
+
+/// d = W a as a body force and torque from the W head's raw output [B, 6p].
+fn disturbance_from(
+    c: &Consts,
+    features: Tensor<2>,
+    rot: &Tensor<3>,
+    a: Tensor<2>,
+) -> (Tensor<2>, Tensor<2>) {
+    let [b, p] = a.dims();
+    let o = features.reshape([b, 6, p]);
+    let oa = mat_vec_n(o, a);
+    let n_world = oa.clone().narrow(1, 0, 3);
+    let force = mat_t_vec(rot.clone(), n_world).mul_scalar(c.mass_kg);
+    let torque = oa.narrow(1, 3, 3).mul_scalar(TORQUE_SCALE_NM);
+    (force, torque)
+}
+
+/// Paper eq. 1 in (q, 𝔭) at `x` with the heads already evaluated there (`n`; `head`: the J⁻¹
+/// head, for the VJP): [`TModel::phase_rhs`].
+pub fn phase_rhs_with(c: &Consts, x: &Phase, f: &Forcing, n: Nets, head: &TMlp) -> Phase {
+    let ev = n.inertia;
+    let w = matvec(ev.jinv.clone(), x.pw.clone());
+    let v = x.pv.clone().div_scalar(c.mass_kg);
+    let (fu, tu) = control_wrench_from(c, n.gain, f.u_norm.clone());
+    let (fd, td) = disturbance_from(c, n.features, &x.rot, f.a.clone());
+    let b = v.dims()[0];
+    // Rᵀ (m g e₃) = m g r₃.
+    let r3 = x.rot.clone().narrow(1, 2, 1).reshape([b, 3]);
+    let pv_dot = x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(c.mass_kg * GRAVITY_M_S2) + fu + fd;
+    let dh = dh_dr_with(c, head, &ev, x.pw.clone());
+    let shape_torque = x.rot.clone().cross(dh, 2).sum_dim(1).reshape([b, 3]);
+    let pw_dot = x.pw.clone().cross(w.clone(), 1) + shape_torque + tu + td;
+    Phase {
+        p: matvec(x.rot.clone(), v),
+        rot: mat_mat(x.rot.clone(), hat(c, w)),
+        pv: pv_dot,
+        pw: pw_dot,
+    }
+}
+
+/// One RK4 step of `dt_s` in (q, 𝔭) with the forcing held constant, the heads at `x` given
+/// (`n_x`) and evaluated by `nets` at the three other stages (`head`: the J⁻¹ head):
+/// [`TModel::rk4`] with J⁻¹(q), g(q), W(q) at the step's start computed once (they are also
+/// the previous step's end, where the velocities were read).
+pub fn rk4_with(
+    c: &Consts,
+    nets: &dyn Fn(&Tensor<3>) -> Nets,
+    head: &TMlp,
+    x: &Phase,
+    n_x: Nets,
+    f: &Forcing,
+    dt_s: f32,
+) -> Phase {
+    let stage = |y: &Phase| phase_rhs_with(c, y, f, nets(&y.rot), head);
+    let k1 = phase_rhs_with(c, x, f, n_x, head);
+    let k2 = stage(&x.axpy(0.5 * dt_s, &k1));
+    let k3 = stage(&x.axpy(0.5 * dt_s, &k2));
+    let k4 = stage(&x.axpy(dt_s, &k3));
+    x.rk4_combine(&k1, &k2, &k3, &k4, dt_s)
+}
+
+/// ζ → 𝔭 with J⁻¹(q) known ([`TModel::to_phase`]).
+pub fn to_phase_with(
+    c: &Consts,
+    ev: &InertiaEval,
+    p: Tensor<2>,
+    rot: Tensor<3>,
+    v: Tensor<2>,
+    w: Tensor<2>,
+) -> Phase {
+    Phase {
+        p,
+        rot,
+        pv: v.mul_scalar(c.mass_kg),
+        pw: matvec(invert_sym3(ev.jinv.clone()), w),
+    }
+}
+
+/// 𝔭 → ζ with J⁻¹(q) known ([`TModel::velocities`]).
+pub fn velocities_with(c: &Consts, ev: &InertiaEval, x: &Phase) -> (Tensor<2>, Tensor<2>) {
+    (
+        x.pv.clone().div_scalar(c.mass_kg),
+        matvec(ev.jinv.clone(), x.pw.clone()),
+    )
 }
 
 /// Inverse of a batch of 3×3 matrices [B,3,3] by cofactors (rows a, b, c:
@@ -547,7 +779,7 @@ pub fn window_loss(
 /// prediction errors over a 5-state window are far below the quarter turn where it would matter.
 pub fn rotation_loss(r_pred: Tensor<3>, r_true: Tensor<3>) -> Tensor<2> {
     let b = r_pred.dims()[0];
-    let e = r_pred.matmul(r_true.swap_dims(1, 2));
+    let e = mat_mat_t(r_pred, r_true);
     let skew = (e.clone() - e.swap_dims(1, 2))
         .mul_scalar(0.5)
         .reshape([b, 9]);

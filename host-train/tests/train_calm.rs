@@ -1,0 +1,57 @@
+//! Issue 10, item 7: the shipped weights must not bake the training set's mean disturbance into
+//! g. The default collection ends with a calm, disturbance-free realization (a_j pinned to 0),
+//! which anchors g to the undisturbed vehicle. Flown on `calm-spiral` — our SITL vehicle, which
+//! the nominal model describes exactly — `learned` without adaptation, against the nominal
+//! IDA-PBC law. Thresholds near 2.5× the measured values (noted as `measured`); the weights
+//! trained without the calm realization (before) are in the comments.
+//!
+//! Run in release: `cargo test --release -p host-train --test train_calm`.
+
+use hamflight::model::HamiltonianModel;
+use host_train::eval::{self, Report};
+use host_train::flight;
+use host_train::Scenario;
+use std::path::{Path, PathBuf};
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+fn fly(name: &str, sc: &Scenario) -> Report {
+    let w = repo(flight::DEFAULT_WEIGHTS);
+    let mut ctrl = flight::by_name(name, sc, Some(&w)).expect("controller exists");
+    let log = eval::fly(sc, ctrl.as_mut());
+    Report::from_log(&log, None)
+}
+
+#[test]
+fn learned_without_adaptation_holds_calm_air_to_millimetres() {
+    let sc = Scenario::load(repo("scenarios/calm-spiral.toml")).expect("scenario loads");
+    let nominal = fly("ida-pbc", &sc);
+    let learned = fly("learned", &sc);
+    let adaptive = fly("adaptive", &sc);
+    for r in [&nominal, &learned, &adaptive] {
+        assert!(!r.crashed, "{} crashed: {r:?}", r.controller);
+    }
+    let score = |r: &Report| r.rmse_pos_window_m.expect("window scored");
+    let (n, l, a) = (score(&nominal), score(&learned), score(&adaptive));
+    println!("calm-spiral RMSE t ≥ 5 s: ida-pbc {n:.3e} m, learned {l:.3e} m, adaptive {a:.3e} m");
+    // measured: ida-pbc 4.4e-6 m (the model is exact); learned 1.89e-3 m (before: 1.37e-2 m);
+    // adaptive 2.7e-5 m (before: 7.0e-5 m). Issue 10's bar, learned within 1.5× of ida-pbc,
+    // is not met: see the README ("Calm air").
+    assert!(n < 2e-5, "ida-pbc on its own exact model: {n:.3e} m");
+    assert!(
+        l < 5e-3,
+        "learned in calm air: {l:.3e} m (before the calm anchor: 1.37e-2 m)"
+    );
+    assert!(a < 7e-5, "adaptive in calm air: {a:.3e} m");
+}
+
+#[test]
+fn shipped_thrust_gain_holds_no_average_thrust_deficit() {
+    let model = flight::load_learned(&repo(flight::DEFAULT_WEIGHTS)).expect("shipped weights load");
+    let g_f = model.terms(&hamflight::State::default()).gain[(2, 0)];
+    println!("learned thrust gain at hover: {g_f:.5}");
+    // measured 0.99729 (before: 0.97999, the realizations' mean thrust deficit).
+    assert!((g_f - 1.0).abs() < 0.007, "thrust gain at hover {g_f}");
+}
