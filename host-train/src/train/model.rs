@@ -674,7 +674,8 @@ pub fn phase_rhs_with(c: &Consts, x: &Phase, f: &Forcing, n: Nets, head: &TMlp) 
     let b = v.dims()[0];
     // Rᵀ (m g e₃) = m g r₃.
     let r3 = x.rot.clone().narrow(1, 2, 1).reshape([b, 3]);
-    let pv_dot = x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(c.mass_kg * GRAVITY_M_S2) + fu + fd;
+    let pv_dot =
+        x.pv.clone().cross(w.clone(), 1) - r3.mul_scalar(c.mass_kg * GRAVITY_M_S2) + fu + fd;
     let dh = dh_dr_with(c, head, &ev, x.pw.clone());
     let shape_torque = x.rot.clone().cross(dh, 2).sum_dim(1).reshape([b, 3]);
     let pw_dot = x.pw.clone().cross(w.clone(), 1) + shape_torque + tu + td;
