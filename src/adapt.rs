@@ -23,13 +23,14 @@
 //!   a disturbance.
 //! - what does tell them apart is the **prediction error** of the composite law below: during a
 //!   transient the model predicts the measured force, so ε ≈ 0 and a stays put. With it `step`
-//!   holds 0.023 cm (`adaptive-composite`); it is not the default law because it does not win
+//!   holds 0.023 cm (`adaptive-composite`; 0.039 cm with the rebuilt weights); it is not the default law because it does not win
 //!   everywhere (see `motor_tau_s` and [`crate::control::Gains`]).
 //! - for the default (gradient) law, the answer is at the source of the transient: the
 //!   **setpoint shaping** of [`crate::shaping`] (a reference model, as model-reference adaptive
 //!   control has it) turns a setpoint jump into a motion the vehicle can fly, and the tracking
 //!   term is frozen while the shaped setpoint is more than 2 cm from the raw one. `step`: 0.51 →
-//!   0.030 cm; smooth trajectories are untouched (paper-spiral 0.0355 cm, bit for bit).
+//!   0.030 cm (0.024 cm with the rebuilt weights); smooth trajectories are untouched
+//!   (paper-spiral bit for bit).
 //! - and the **normalized gradient** ([`AdaptationRates::normalized`], default on): the law's
 //!   loop gain grows as ‖W‖², so features far larger than nominal (a badly scaled trained model,
 //!   or the ×5 of the wrong-features test) made it unstable (paper-spiral crashed at 1.3 s).
