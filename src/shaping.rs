@@ -65,11 +65,6 @@ impl SetpointShaper {
         *self = Self::default();
     }
 
-    /// ‖δ‖ (m): how far the shaped setpoint is from the raw one.
-    pub fn offset_norm_m(&self) -> f32 {
-        crate::fpu::sqrt(self.offset_m.norm_squared())
-    }
-
     /// True while ‖δ‖ > [`SHAPING_FREEZE_M`]: the gradient law's tracking term is frozen.
     pub fn freezes_adaptation(&self) -> bool {
         self.active && self.offset_m.norm_squared() > SHAPING_FREEZE_M * SHAPING_FREEZE_M

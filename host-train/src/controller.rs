@@ -55,8 +55,7 @@ impl From<&TrajectoryPoint> for hamflight::Setpoint {
     }
 }
 
-/// f64 → f32, field by field: how the plant's state becomes the core's (`train/data.rs`'s
-/// `f32_state` still repeats it).
+/// f64 → f32, field by field: how the plant's state becomes the core's (the one place).
 impl From<&PlantState> for hamflight::State {
     fn from(s: &PlantState) -> Self {
         hamflight::State {

@@ -58,15 +58,6 @@ pub struct Windows {
     pub vehicle: dataset::VehicleDescription,
 }
 
-fn f32_state(s: &crate::plant::PlantState) -> State {
-    State {
-        p_m: s.p_m.cast(),
-        rot: s.rot.cast(),
-        v_body_m_s: s.v_body_m_s.cast(),
-        w_body_rad_s: s.w_body_rad_s.cast(),
-    }
-}
-
 /// Reads the dataset in `dir` and cuts it into `spec` windows ([`dataset::windows`]).
 ///
 /// # Errors
@@ -81,7 +72,7 @@ pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
         let samples = &ds.realizations[w.realization].flights[w.flight].samples;
         let win = &samples[w.start..w.start + spec.len];
         windows.push(Window {
-            states: win.iter().map(|s| f32_state(&s.state)).collect(),
+            states: win.iter().map(|s| State::from(&s.state)).collect(),
             u: win[..spec.len - 1]
                 .iter()
                 .map(|s| s.wrench.map(|x| x as f32))
