@@ -55,7 +55,11 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
         ..CollectConfig::default()
     };
     collect::collect(&dir, &cc).context("collecting the benchmark's windows")?;
-    let cfg = TrainConfig::default();
+    // The PyTorch reference's problem: the paper's model, no per-flight rotor gains.
+    let cfg = TrainConfig {
+        flight_rotor_gains: false,
+        ..TrainConfig::default()
+    };
     let windows = data::load(&dir, cfg.window);
     std::fs::remove_dir_all(&dir).ok();
     let windows = windows?;

@@ -45,6 +45,9 @@ pub struct RealizationReport {
     pub disturbance_free: bool,
     /// The learned a_j.
     pub a: [f32; FEATURES],
+    /// The rotor efficiencies 1 + δηⱼ learned for this flight in the main stage (null when
+    /// not learned: `--no-flight-rotor-gains`).
+    pub learned_rotor_efficiency: Option<[f32; 4]>,
     /// W(hover) a_j: the learned disturbance wrench at hover [F (N, body); τ (N·m, body)].
     pub learned_wrench_at_hover: [f32; 6],
     /// The true disturbance wrench at hover: m w plus the rotor deficits at hover thrust (when
@@ -168,17 +171,27 @@ pub fn true_wrench_at_hover(
     [f.x, f.y, f.z, t.x, t.y, t.z]
 }
 
+/// The CF2X mixer A: the wrench [f; τx; τy; τz] (N, N·m) of rotor thrusts T (N) is A T.
+pub fn rotor_mixer() -> nalgebra::Matrix4<f32> {
+    nalgebra::Matrix4::from_fn(|r, c| {
+        let (x, y, s) = ROTORS[c];
+        [1.0, y, -x, s * KM_OVER_KF_M][r]
+    })
+}
+
+/// The realized wrench per commanded wrench of a CF2X whose rotors make `eff` of their nominal
+/// thrust: A diag(eff) A⁻¹ (the mixer inverse, the rotors' factors, the mixer).
+pub fn rotor_scaling(eff: &[f32; 4]) -> nalgebra::Matrix4<f32> {
+    let a = rotor_mixer();
+    let a_inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix4::identity);
+    a * nalgebra::Matrix4::from_diagonal(&Vector4::from(*eff)) * a_inv
+}
+
 /// The true input gain g (R = I) of the CF2X airframe whose rotors make `eff` of their nominal
 /// thrust: the realized wrench per unit of commanded wrench (the mixer inverse, the rotors'
 /// factors, the mixer), force rows times `model_mass_kg / true_mass_kg`.
 pub fn true_gain_of(eff: &[f32; 4], model_mass_kg: f32, true_mass_kg: f32) -> [[f32; 4]; 6] {
-    // Commanded wrench → rotor thrusts: the inverse of [f; τx; τy; τz] = A T.
-    let a = nalgebra::Matrix4::from_fn(|r, c| {
-        let (x, y, s) = ROTORS[c];
-        [1.0, y, -x, s * KM_OVER_KF_M][r]
-    });
-    let a_inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix4::identity);
-    let realized = a * nalgebra::Matrix4::from_diagonal(&Vector4::from(*eff)) * a_inv;
+    let realized = rotor_scaling(eff);
     let g = true_input_gain();
     let ratio = model_mass_kg / true_mass_kg;
     std::array::from_fn(|r| {
@@ -229,13 +242,15 @@ pub fn report(
         .realizations
         .iter()
         .zip(trained.a.iter())
-        .map(|(r, a)| {
+        .enumerate()
+        .map(|(j, (r, a))| {
             let d = terms.features * nalgebra::SVector::<f32, FEATURES>::from_row_slice(a);
             RealizationReport {
                 true_wind_m_s2: r.wind_m_s2,
                 true_rotor_efficiency: r.rotor_efficiency,
                 disturbance_free: r.disturbance_free,
                 a: *a,
+                learned_rotor_efficiency: trained.rotor_gain.get(j).map(|d| d.map(|x| 1.0 + x)),
                 learned_wrench_at_hover: std::array::from_fn(|k| d[k]),
                 true_wrench_at_hover: match (r.wind_m_s2, r.rotor_efficiency) {
                     (Some(w), Some(e)) => Some(true_wrench_at_hover(&w, &e, model_mass, true_mass)),

@@ -37,6 +37,9 @@ pub struct Trained {
     pub weights: ModelWeights,
     /// a_j per realization.
     pub a: Vec<[f32; FEATURES]>,
+    /// Each realization's rotor gain deviations δηⱼ (rotor i realizes 1 + δηⱼᵢ of its
+    /// command; [`TrainConfig::flight_rotor_gains`]); empty when not learned.
+    pub rotor_gain: Vec<[f32; ROTOR_GAINS]>,
     /// The training curve.
     pub curve: Vec<EpochStats>,
     /// Held-out loss of the initial (prior) model.
@@ -217,6 +220,9 @@ impl Adam {
     }
 }
 
+/// Rotor gains per flight: the CF2X's four rotors.
+pub const ROTOR_GAINS: usize = 4;
+
 /// Index in [`TModel::tensors`] of the W head's input-layer weight (J⁻¹ and g heads take 6 each).
 const FEATURE_INPUT_WEIGHT: usize = 12;
 
@@ -246,6 +252,8 @@ struct Trainer<'a> {
     a_mask: Option<Tensor<2>>,
     /// Use [`batch_loss_reference`] (benchmarks only).
     reference: bool,
+    /// Tensors frozen (no gradient, no step): the J⁻¹ and g heads in the feature stage.
+    frozen: Vec<bool>,
 }
 
 impl Trainer<'_> {
@@ -282,7 +290,15 @@ impl Trainer<'_> {
         let leaves: Vec<Tensor<2>> = self
             .params
             .iter()
-            .map(|p| p.clone().autodiff().require_grad())
+            .zip(&self.frozen)
+            .map(|(p, &frozen)| {
+                let p = p.clone().autodiff();
+                if frozen {
+                    p
+                } else {
+                    p.require_grad()
+                }
+            })
             .collect();
         let model = TModel::from_tensors(&leaves[..self.n_net]);
         let loss_fn = if self.reference {
@@ -359,7 +375,13 @@ impl<'a> Trainer<'a> {
         let n_real = data.realizations.len().max(1);
         let init = init_weights(cfg.seed, cfg.init_out_gain);
         let mut params = TModel::from_core(&init, device).tensors();
-        params.push(Tensor::zeros([n_real, FEATURES], device));
+        let width = FEATURES
+            + if cfg.flight_rotor_gains {
+                ROTOR_GAINS
+            } else {
+                0
+            };
+        params.push(Tensor::zeros([n_real, width], device));
         let n_net = params.len() - 1;
         // Disturbance-free realizations keep a_j = 0: their rows are masked after every step.
         let calm: Vec<bool> = (0..n_real)
@@ -381,6 +403,7 @@ impl<'a> Trainer<'a> {
             rng: ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_add(1)),
             a_mask,
             reference: false,
+            frozen: vec![false; n_net + 1],
         }
     }
 }
@@ -511,17 +534,77 @@ pub fn train(
     if best.0.is_finite() {
         t.params = best.1;
     }
+    let rotor_gain = rotor_gains_of(&t.params[n_net]);
+    if !rotor_gain.is_empty() && cfg.feature_epochs > 0 {
+        feature_stage(&mut t, cfg, &val, &mut curve, &bar, train, start);
+    }
     bar.finish();
     let model = TModel::from_tensors(&t.params[..n_net]);
-    let a_flat = to_vec(&t.params[n_net]);
-    let a = a_flat
-        .chunks_exact(FEATURES)
+    let per_flight = &t.params[n_net];
+    let width = per_flight.dims()[1];
+    let flat = to_vec(per_flight);
+    let a = flat
+        .chunks_exact(width)
         .map(|c| std::array::from_fn(|k| c[k]))
         .collect();
     Trained {
         weights: model.to_core(&c_plain),
         a,
+        rotor_gain,
         curve,
         initial_val_loss,
     }
+}
+
+/// The rotor gain deviations δηⱼ in the per-flight tensor [M, p + 4] (empty for [M, p]).
+fn rotor_gains_of(per_flight: &Tensor<2>) -> Vec<[f32; ROTOR_GAINS]> {
+    let width = per_flight.dims()[1];
+    if width < FEATURES + ROTOR_GAINS {
+        return Vec::new();
+    }
+    to_vec(per_flight)
+        .chunks_exact(width)
+        .map(|c| std::array::from_fn(|k| c[FEATURES + k]))
+        .collect()
+}
+
+/// The feature stage after training with per-flight rotor gains: J⁻¹ and g frozen, the δηⱼ
+/// dropped, and W with the a_j trained alone for `cfg.feature_epochs` epochs (a cosine from
+/// `cfg.lr`; the best held-out epoch kept). In flight the controller has the shared g and
+/// adapts a in W, so W must carry each flight's rotor deficits as the additive W a that the
+/// adaptation law can estimate; the rotor gains only kept them out of g.
+fn feature_stage(
+    t: &mut Trainer<'_>,
+    cfg: &TrainConfig,
+    val: &dyn Fn(&[Tensor<2>]) -> f64,
+    curve: &mut Vec<EpochStats>,
+    bar: &ProgressBar,
+    train: &[usize],
+    start: Instant,
+) {
+    let n_net = t.n_net;
+    t.params[n_net] = t.params[n_net].clone().narrow(1, 0, FEATURES);
+    t.frozen = (0..=n_net).map(|i| i < FEATURE_INPUT_WEIGHT).collect();
+    t.adam = Adam::new(&t.params);
+    bar.inc_length(cfg.feature_epochs as u64);
+    let mut best = (val(&t.params), t.params.clone());
+    for epoch in 1..=cfg.feature_epochs {
+        let lr = lr_at(cfg.lr, epoch, cfg.feature_epochs, 0);
+        let train_loss = t.epoch(train, lr);
+        let val_loss = val(&t.params);
+        curve.push(EpochStats {
+            epoch: curve.len() + 1,
+            train_loss,
+            val_loss,
+            elapsed_s: start.elapsed().as_secs_f64(),
+        });
+        bar.set_message(format!(
+            "features: loss {train_loss:.3e} val {val_loss:.3e}"
+        ));
+        bar.inc(1);
+        if val_loss < best.0 {
+            best = (val_loss, t.params.clone());
+        }
+    }
+    t.params = best.1;
 }

@@ -172,6 +172,10 @@ pub struct Consts {
     wrench_scale: Tensor<2>,
     /// `[1, 4]` 1 / CONTROL_SCALE.
     control_inv_scale: Tensor<2>,
+    /// `[4, 4]`: a row u/CONTROL_SCALE → the CF2X's rotor thrusts (row form of A⁻¹ S).
+    rotor_from_u: Tensor<2>,
+    /// `[4, 4]`: rotor thrusts → u/CONTROL_SCALE (row form of S⁻¹ A).
+    u_from_rotor: Tensor<2>,
     /// The vehicle's mass m (kg): known, not learned (paper Sec. 4).
     pub mass_kg: f32,
 }
@@ -200,6 +204,19 @@ impl Consts {
         set(&mut h, 1, 6, -1.0);
         set(&mut h, 0, 7, 1.0);
         let cinv: Vec<f32> = CONTROL_SCALE.iter().map(|c| 1.0 / c).collect();
+        let mixer = super::export::rotor_mixer();
+        let scale = nalgebra::Matrix4::from_diagonal(&nalgebra::Vector4::from(CONTROL_SCALE));
+        let mixer_inv = mixer
+            .try_inverse()
+            .unwrap_or_else(nalgebra::Matrix4::identity);
+        let scale_inv = scale
+            .try_inverse()
+            .unwrap_or_else(nalgebra::Matrix4::identity);
+        // Row-vector form: x · Mᵀ, stored row-major.
+        let row_form = |m: nalgebra::Matrix4<f32>| {
+            let v: Vec<f32> = (0..16).map(|k| m[(k % 4, k / 4)]).collect();
+            Tensor::from_data(TensorData::new(v, [4, 4]), device)
+        };
         Self {
             l_map: Tensor::from_data(TensorData::new(l, [6, 9]), device),
             l_map_t: Tensor::from_data(TensorData::new(lt, [9, 6]), device),
@@ -209,6 +226,8 @@ impl Consts {
                 .mul_scalar(INERTIA_INV_EPS),
             wrench_scale: Tensor::from_data(TensorData::new(WRENCH_SCALE.to_vec(), [1, 6]), device),
             control_inv_scale: Tensor::from_data(TensorData::new(cinv, [1, 4]), device),
+            rotor_from_u: row_form(mixer_inv * scale),
+            u_from_rotor: row_form(scale_inv * mixer),
             mass_kg,
         }
     }
@@ -416,26 +435,52 @@ impl Phase {
 
 /// Per-batch inputs of the ODE that stay constant through a window.
 pub struct Forcing {
-    /// u / CONTROL_SCALE [B,4].
+    /// The realized control over CONTROL_SCALE [B,4]: u/CONTROL_SCALE, through the flight's
+    /// rotor gains when they are learned.
     pub u_norm: Tensor<2>,
     /// a_j of each window [B,p].
     pub a: Tensor<2>,
+    /// Each window's flight's rotor gain deviations δηⱼ [B,4] (None: not learned).
+    pub rotor_gain: Option<Tensor<2>>,
 }
 
 impl Forcing {
-    /// From the raw control [B,4] and the per-realization weights A [M,p] with indices [B].
-    pub fn new(c: &Consts, u: Tensor<2>, a_all: Tensor<2>, idx: Tensor<1, Int>) -> Self {
+    /// From the raw control [B,4] and the per-flight parameters [M,p] (the a_j) or [M,p+4]
+    /// (the a_j, then the rotor gain deviations δηⱼ) with indices [B].
+    pub fn new(c: &Consts, u: Tensor<2>, per_flight: Tensor<2>, idx: Tensor<1, Int>) -> Self {
+        let sel = per_flight.select(0, idx);
+        let [_, width] = sel.dims();
+        let p = width.min(hamflight::model::FEATURES);
+        let rotor_gain = (width > p).then(|| sel.clone().narrow(1, p, width - p));
+        let a = if width > p { sel.narrow(1, 0, p) } else { sel };
+        let mut f = Self {
+            u_norm: u.clone(),
+            a,
+            rotor_gain,
+        };
+        f.u_norm = f.realized(c, u);
+        f
+    }
+
+    /// The same a_j and rotor gains with another raw control [B,4] (the next step of a window).
+    pub fn with_control(&self, c: &Consts, u: Tensor<2>) -> Self {
         Self {
-            u_norm: u * c.control_inv_scale.clone(),
-            a: a_all.select(0, idx),
+            u_norm: self.realized(c, u),
+            a: self.a.clone(),
+            rotor_gain: self.rotor_gain.clone(),
         }
     }
 
-    /// The same a_j with another raw control [B,4] (the next step of a window).
-    pub fn with_control(&self, c: &Consts, u: Tensor<2>) -> Self {
-        Self {
-            u_norm: u * c.control_inv_scale.clone(),
-            a: self.a.clone(),
+    /// u/CONTROL_SCALE of the wrench the flight's rotors realize for the raw command `u`:
+    /// (I + A diag(δη) A⁻¹) u in the model's units (A the CF2X mixer).
+    fn realized(&self, c: &Consts, u: Tensor<2>) -> Tensor<2> {
+        let u_norm = u * c.control_inv_scale.clone();
+        match &self.rotor_gain {
+            None => u_norm,
+            Some(eta) => {
+                let rotors = u_norm.clone().matmul(c.rotor_from_u.clone());
+                u_norm + (rotors * eta.clone()).matmul(c.u_from_rotor.clone())
+            }
         }
     }
 }
@@ -789,4 +834,48 @@ pub fn rotation_loss(r_pred: Tensor<3>, r_true: Tensor<3>) -> Tensor<2> {
     s.clone()
         + s.clone().square().div_scalar(3.0)
         + s.clone().square().mul(s).mul_scalar(8.0 / 45.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flight's rotor gains turn the commanded wrench into what rotors with efficiencies
+    /// 1 + δη realize: A diag(1 + δη) A⁻¹ u, in the model's units u / CONTROL_SCALE.
+    #[test]
+    fn rotor_gains_realize_the_weak_rotors_wrench() {
+        let device = Device::flex();
+        let c = Consts::new(&device, 0.027);
+        let eff = [0.8f32, 0.9, 1.0, 1.05];
+        let u = [0.27f32, 1e-4, -2e-4, 5e-5];
+        let mut per_flight = vec![0f32; hamflight::model::FEATURES];
+        per_flight.extend(eff.iter().map(|e| e - 1.0));
+        let width = per_flight.len();
+        let f = Forcing::new(
+            &c,
+            Tensor::from_data(TensorData::new(u.to_vec(), [1, 4]), &device),
+            Tensor::from_data(TensorData::new(per_flight, [1, width]), &device),
+            Tensor::from_data(TensorData::new(vec![0i64], [1]), &device),
+        );
+        let got = to_vec(&f.u_norm);
+        let want = super::super::export::rotor_scaling(&eff) * nalgebra::Vector4::from(u);
+        for k in 0..4 {
+            let w = want[k] / CONTROL_SCALE[k];
+            assert!(
+                (got[k] - w).abs() < 1e-5 * w.abs().max(1.0),
+                "{k}: {} vs {w}",
+                got[k]
+            );
+        }
+        // Without rotor gains the command passes as it is.
+        let plain = Forcing::new(
+            &c,
+            Tensor::from_data(TensorData::new(u.to_vec(), [1, 4]), &device),
+            Tensor::zeros([1, hamflight::model::FEATURES], &device),
+            Tensor::from_data(TensorData::new(vec![0i64], [1]), &device),
+        );
+        for (k, v) in to_vec(&plain.u_norm).iter().enumerate() {
+            assert!((v - u[k] / CONTROL_SCALE[k]).abs() < 1e-6);
+        }
+    }
 }
