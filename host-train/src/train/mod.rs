@@ -143,6 +143,14 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
             windows.mass_kg
         );
     }
+    if cfg.flight_rotor_gains && !windows.realizations.iter().any(|r| r.disturbance_free) {
+        eprintln!(
+            "note: no flight in `{}` is marked disturbance-free (`import --calm`), so the shared \
+             g and the flights' rotor gains share a common scale that only their start at the \
+             nominal g fixes; mark a calm flight, or train with --no-flight-rotor-gains",
+            data_dir.display()
+        );
+    }
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
     let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
     let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
