@@ -536,7 +536,8 @@ pub fn train(
     }
     let rotor_gain = rotor_gains_of(&t.params[n_net]);
     if !rotor_gain.is_empty() && cfg.feature_epochs > 0 {
-        feature_stage(&mut t, cfg, &val, &mut curve, &bar, train, start);
+        bar.inc_length(cfg.feature_epochs as u64);
+        feature_stage(&mut t, cfg, &val, &mut curve, &record, train);
     }
     bar.finish();
     let model = TModel::from_tensors(&t.params[..n_net]);
@@ -578,30 +579,19 @@ fn feature_stage(
     cfg: &TrainConfig,
     val: &dyn Fn(&[Tensor<2>]) -> f64,
     curve: &mut Vec<EpochStats>,
-    bar: &ProgressBar,
+    record: &dyn Fn(&mut Vec<EpochStats>, f64, f64),
     train: &[usize],
-    start: Instant,
 ) {
     let n_net = t.n_net;
     t.params[n_net] = t.params[n_net].clone().narrow(1, 0, FEATURES);
     t.frozen = (0..=n_net).map(|i| i < FEATURE_INPUT_WEIGHT).collect();
     t.adam = Adam::new(&t.params);
-    bar.inc_length(cfg.feature_epochs as u64);
     let mut best = (val(&t.params), t.params.clone());
     for epoch in 1..=cfg.feature_epochs {
         let lr = lr_at(cfg.lr, epoch, cfg.feature_epochs, 0);
         let train_loss = t.epoch(train, lr);
         let val_loss = val(&t.params);
-        curve.push(EpochStats {
-            epoch: curve.len() + 1,
-            train_loss,
-            val_loss,
-            elapsed_s: start.elapsed().as_secs_f64(),
-        });
-        bar.set_message(format!(
-            "features: loss {train_loss:.3e} val {val_loss:.3e}"
-        ));
-        bar.inc(1);
+        record(curve, train_loss, val_loss);
         if val_loss < best.0 {
             best = (val_loss, t.params.clone());
         }

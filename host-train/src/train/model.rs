@@ -453,34 +453,33 @@ impl Forcing {
         let p = width.min(hamflight::model::FEATURES);
         let rotor_gain = (width > p).then(|| sel.clone().narrow(1, p, width - p));
         let a = if width > p { sel.narrow(1, 0, p) } else { sel };
-        let mut f = Self {
-            u_norm: u.clone(),
+        Self {
+            u_norm: realized(c, u, rotor_gain.as_ref()),
             a,
             rotor_gain,
-        };
-        f.u_norm = f.realized(c, u);
-        f
+        }
     }
 
     /// The same a_j and rotor gains with another raw control [B,4] (the next step of a window).
     pub fn with_control(&self, c: &Consts, u: Tensor<2>) -> Self {
         Self {
-            u_norm: self.realized(c, u),
+            u_norm: realized(c, u, self.rotor_gain.as_ref()),
             a: self.a.clone(),
             rotor_gain: self.rotor_gain.clone(),
         }
     }
+}
 
-    /// u/CONTROL_SCALE of the wrench the flight's rotors realize for the raw command `u`:
-    /// (I + A diag(δη) A⁻¹) u in the model's units (A the CF2X mixer).
-    fn realized(&self, c: &Consts, u: Tensor<2>) -> Tensor<2> {
-        let u_norm = u * c.control_inv_scale.clone();
-        match &self.rotor_gain {
-            None => u_norm,
-            Some(eta) => {
-                let rotors = u_norm.clone().matmul(c.rotor_from_u.clone());
-                u_norm + (rotors * eta.clone()).matmul(c.u_from_rotor.clone())
-            }
+/// u/CONTROL_SCALE of the wrench that rotors with gain deviations `rotor_gain` (δη, [B,4])
+/// realize for the raw command `u`: (I + A diag(δη) A⁻¹) u in the model's units (A the CF2X
+/// mixer); u/CONTROL_SCALE itself without them.
+fn realized(c: &Consts, u: Tensor<2>, rotor_gain: Option<&Tensor<2>>) -> Tensor<2> {
+    let u_norm = u * c.control_inv_scale.clone();
+    match rotor_gain {
+        None => u_norm,
+        Some(eta) => {
+            let rotors = u_norm.clone().matmul(c.rotor_from_u.clone());
+            u_norm + (rotors * eta.clone()).matmul(c.u_from_rotor.clone())
         }
     }
 }
