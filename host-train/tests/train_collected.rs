@@ -58,6 +58,23 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
         }
     }
     assert!(r.realizations.iter().any(|x| x.disturbance_free));
+    // The calm flight's held-out windows, where the nominal model is exact, are reported apart.
+    let calm = r
+        .heldout_calm
+        .as_ref()
+        .expect("a calm flight is held out too");
+    eprintln!(
+        "calm held-out: {} windows, rate error learned {:.2e}, nominal {:.2e} rad/s",
+        calm.windows,
+        last(&calm.learned.rate_rad_s),
+        last(&calm.nominal.rate_rad_s)
+    );
+    assert!(calm.windows > 0);
+    assert!(
+        last(&calm.nominal.rate_rad_s) < 1e-5,
+        "nominal is exact on calm flights"
+    );
+    assert!(last(&calm.learned.rate_rad_s) < 0.5 * last(&r.heldout_nominal.rate_rad_s));
     let g_f = r.learned_gain_hover[2][0];
     eprintln!("thrust gain at hover {g_f}");
     assert!((g_f - 1.0).abs() < 0.005, "thrust gain at hover {g_f}");

@@ -34,6 +34,17 @@ pub struct PredictionErrors {
     pub rate_rad_s: Vec<f64>,
 }
 
+/// Held-out errors on the disturbance-free flights.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalmPredictionErrors {
+    /// Held-out windows of disturbance-free flights.
+    pub windows: usize,
+    /// The learned model (a = 0).
+    pub learned: PredictionErrors,
+    /// The stock vehicle's nominal model.
+    pub nominal: PredictionErrors,
+}
+
 /// One realization's learned a_j next to its true disturbance.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealizationReport {
@@ -76,6 +87,10 @@ pub struct TrainReport {
     pub heldout_learned: PredictionErrors,
     /// Held-out errors: learned model with a = 0 (no disturbance compensation).
     pub heldout_learned_no_disturbance: PredictionErrors,
+    /// Held-out errors on the disturbance-free flights' windows only: learned (a = 0) and the
+    /// stock nominal model (null when no flight is marked disturbance-free). On the stock
+    /// vehicle the nominal model is exact there, so this is the learned model's own error.
+    pub heldout_calm: Option<CalmPredictionErrors>,
     /// Held-out errors: the stock vehicle's nominal model (the CF2X's constants, no
     /// disturbance).
     pub heldout_nominal: PredictionErrors,
@@ -276,6 +291,7 @@ pub fn report(
         curve: trained.curve.clone(),
         heldout_learned: prediction_errors(&learned, data, heldout, Some(&trained.a)),
         heldout_learned_no_disturbance: prediction_errors(&learned, data, heldout, None),
+        heldout_calm: calm_errors(&learned, &nominal, data, heldout),
         heldout_nominal: prediction_errors(&nominal, data, heldout, None),
         heldout_nominal_true_vehicle: true_vehicle
             .map(|m| prediction_errors(&m, data, heldout, None)),
@@ -290,6 +306,30 @@ pub fn report(
         true_gain: true_gain_of(&rotor_eff, model_mass, true_mass),
         realizations,
     }
+}
+
+/// [`TrainReport::heldout_calm`]: the held-out windows of the disturbance-free flights.
+fn calm_errors(
+    learned: &LearnedModel,
+    nominal: &NominalModel,
+    data: &Windows,
+    heldout: &[usize],
+) -> Option<CalmPredictionErrors> {
+    let calm: Vec<usize> = heldout
+        .iter()
+        .copied()
+        .filter(|&i| {
+            data.windows
+                .get(i)
+                .and_then(|w| data.realizations.get(w.realization))
+                .is_some_and(|r| r.disturbance_free)
+        })
+        .collect();
+    (!calm.is_empty()).then(|| CalmPredictionErrors {
+        windows: calm.len(),
+        learned: prediction_errors(learned, data, &calm, None),
+        nominal: prediction_errors(nominal, data, &calm, None),
+    })
 }
 
 /// Writes the blob to `out` and the report to `out.json` (appending `.json` to the file name).

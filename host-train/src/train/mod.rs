@@ -310,6 +310,21 @@ pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
             last(&n.rate_rad_s),
         );
     }
+    if let Some(c) = &r.heldout_calm {
+        println!(
+            "held-out {}-step error on the {} windows of disturbance-free flights: learned {:.2e} / {:.2e} / {:.2e} / {:.2e}, nominal {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            c.learned.pos_m.len(),
+            c.windows,
+            last(&c.learned.pos_m),
+            last(&c.learned.rot_rad),
+            last(&c.learned.vel_m_s),
+            last(&c.learned.rate_rad_s),
+            last(&c.nominal.pos_m),
+            last(&c.nominal.rot_rad),
+            last(&c.nominal.vel_m_s),
+            last(&c.nominal.rate_rad_s),
+        );
+    }
     if let Some(c) = &r.flight_check {
         let cm = |v: Option<f64>| v.map_or("—".into(), |m| format!("{:.2} cm", 100.0 * m));
         println!(
