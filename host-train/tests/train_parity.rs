@@ -353,3 +353,62 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The hand-fused kernel (`train::fused`) gives the burn path's loss and gradients, on
+/// collected data, with and without the per-flight rotor gains: at the initial weights, and at
+/// weights and per-flight parameters moved off them (nonzero a_j and δηⱼ, so that the W head
+/// and every term of the rotor gains' path carry a gradient).
+#[test]
+fn fused_kernel_gradients_equal_burns() {
+    use host_train::collect::{collect, CollectConfig};
+    use host_train::train::r#loop::{gradients_at, initial_params};
+    use host_train::train::{data, TrainConfig};
+    let dir = train_common::scratch("fused-grads");
+    let cc = CollectConfig {
+        realizations: 2,
+        windows: 60,
+        poses: 2,
+        ..CollectConfig::default()
+    };
+    collect(&dir, &cc).expect("collect");
+    for rotor_gains in [false, true] {
+        let cfg = TrainConfig {
+            flight_rotor_gains: rotor_gains,
+            ..TrainConfig::default()
+        };
+        let windows = data::load(&dir, cfg.window).expect("load");
+        // Not a multiple of the kernel's 8 lanes: the padding lanes must not count.
+        let ids: Vec<usize> = (0..windows.windows.len().min(101)).collect();
+        assert_eq!(ids.len(), 101);
+        let init = initial_params(&cfg, &windows);
+        let mut moved = init.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for t in moved.iter_mut() {
+            for v in t.iter_mut() {
+                *v += rng.gen_range(-0.1..0.1);
+            }
+        }
+        for (what, params) in [("initial", &init), ("moved", &moved)] {
+            let (l_burn, g_burn) = gradients_at(&cfg, &windows, &ids, params, false);
+            let (l_fused, g_fused) = gradients_at(&cfg, &windows, &ids, params, true);
+            let tag = format!("rotor gains {rotor_gains}, {what} weights");
+            assert!(l_burn.is_finite() && l_burn > 0.0, "{tag}: loss {l_burn}");
+            assert!(
+                (l_fused - l_burn).abs() <= 1e-4 * l_burn,
+                "{tag}: loss {l_fused} vs {l_burn}"
+            );
+            assert_eq!(g_fused.len(), g_burn.len());
+            for (k, (gf, gb)) in g_fused.iter().zip(&g_burn).enumerate() {
+                assert_eq!(gf.len(), gb.len(), "{tag}: tensor {k}'s size");
+                let norm = gb.iter().map(|x| x * x).sum::<f32>().sqrt();
+                let e = rel_err(gf, gb);
+                eprintln!("{tag}: tensor {k}: |g| {norm:.2e}, relative error {e:.2e}");
+                if what == "moved" {
+                    assert!(norm > 0.0, "{tag}: tensor {k} has a zero gradient");
+                }
+                assert!(e < 1e-3, "{tag}: gradient of tensor {k} off by {e}");
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

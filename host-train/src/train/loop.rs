@@ -453,6 +453,49 @@ pub fn initial_gradients(
     (loss, g)
 }
 
+/// The parameters [`initial_gradients`] starts from, flattened ([`TModel::tensors`] order, then
+/// the per-flight tensor): for tests that move them away from the prior.
+pub fn initial_params(cfg: &TrainConfig, data: &Windows) -> Vec<Vec<f32>> {
+    Trainer::new(cfg, data, &Device::flex())
+        .params
+        .iter()
+        .map(to_vec)
+        .collect()
+}
+
+/// The mean loss over the windows `ids` and every tensor's gradient (flattened) at `params`
+/// ([`initial_params`]' layout), by the burn path on one graph or by the hand-fused kernel
+/// ([`super::fused::loss_and_grads`] on the cores, `fused`): for the test that they agree.
+///
+/// # Panics
+/// When `params` do not have the trainer's shapes.
+pub fn gradients_at(
+    cfg: &TrainConfig,
+    data: &Windows,
+    ids: &[usize],
+    params: &[Vec<f32>],
+    fused: bool,
+) -> (f64, Vec<Vec<f32>>) {
+    let mut t = Trainer::new(cfg, data, &Device::flex());
+    assert_eq!(params.len(), t.params.len(), "parameter count");
+    if fused {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        return super::fused::loss_and_grads(data, ids, params, t.dt_s, cfg.vel_weight, cores)
+            .expect("the fused kernel takes the core's sizes");
+    }
+    for (p, v) in t.params.iter_mut().zip(params) {
+        let dims = p.dims();
+        assert_eq!(dims[0] * dims[1], v.len(), "tensor size");
+        *p = Tensor::from_data(TensorData::new(v.clone(), dims), &p.device());
+    }
+    let (loss, g) = t.shard_loss_and_grads(ids);
+    let g = g
+        .iter()
+        .map(|g| g.as_ref().map(to_vec).unwrap_or_default())
+        .collect();
+    (loss, g)
+}
+
 /// User + system CPU time of this process (s) from `/proc/self/stat` (Linux, 100 ticks/s).
 fn process_cpu_s() -> Option<f64> {
     let stat = std::fs::read_to_string("/proc/self/stat").ok()?;

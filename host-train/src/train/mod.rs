@@ -14,6 +14,7 @@ pub mod blackbox;
 pub mod check;
 pub mod data;
 pub mod export;
+pub mod fused;
 #[path = "loop.rs"]
 pub mod r#loop;
 pub mod model;
