@@ -254,6 +254,9 @@ struct Trainer<'a> {
     reference: bool,
     /// Tensors frozen (no gradient, no step): the J⁻¹ and g heads in the feature stage.
     frozen: Vec<bool>,
+    /// Take the loss and gradients from the hand-fused kernel ([`super::fused`]) instead of
+    /// burn's autodiff (default; `HAMFLIGHT_TRAIN_BURN=1` selects burn).
+    fused: bool,
 }
 
 impl Trainer<'_> {
@@ -319,7 +322,9 @@ impl Trainer<'_> {
         (f64::from(to_vec(&loss.inner())[0]), g)
     }
 
-    /// The mean loss over the windows `ids` and its gradient for every tensor. A large
+    /// The mean loss over the windows `ids` and its gradient for every tensor: by the
+    /// hand-fused kernel ([`super::fused`], the windows split over the cores) unless
+    /// [`Trainer::fused`] is off or the benchmark's reference is asked for. By burn, a large
     /// minibatch is split into one shard per core, each with its own autodiff graph (the flex
     /// backend runs an op on one core), and the shards' gradients are averaged, weighted by
     /// their sizes: the whole batch's gradient, to rounding. Measured with `host-train
@@ -328,6 +333,11 @@ impl Trainer<'_> {
     /// other and on the autodiff registry's lock, and it is slower at small batches.)
     fn loss_and_grads(&self, ids: &[usize]) -> Shard {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if self.fused && !self.reference {
+            if let Some(s) = self.fused_loss_and_grads(ids, cores) {
+                return s;
+            }
+        }
         if cores < 2 || ids.len() < SHARD_MIN_BATCH || self.reference {
             return self.shard_loss_and_grads(ids);
         }
@@ -355,6 +365,31 @@ impl Trainer<'_> {
             }
         }
         (loss, grads)
+    }
+}
+
+impl Trainer<'_> {
+    /// [`Trainer::loss_and_grads`] by the hand-fused kernel on `threads` threads (`None` when
+    /// it declines the shapes).
+    fn fused_loss_and_grads(&self, ids: &[usize], threads: usize) -> Option<Shard> {
+        let flat: Vec<Vec<f32>> = self.params.iter().map(to_vec).collect();
+        let (loss, g) = super::fused::loss_and_grads(
+            self.data,
+            ids,
+            &flat,
+            self.dt_s,
+            self.cfg.vel_weight,
+            threads,
+        )?;
+        let grads = g
+            .into_iter()
+            .zip(&self.params)
+            .zip(&self.frozen)
+            .map(|((g, p), &frozen)| {
+                (!frozen).then(|| Tensor::from_data(TensorData::new(g, p.dims()), &p.device()))
+            })
+            .collect();
+        Some((loss, grads))
     }
 }
 
@@ -404,6 +439,8 @@ impl<'a> Trainer<'a> {
             a_mask,
             reference: false,
             frozen: vec![false; n_net + 1],
+            fused: std::env::var_os("HAMFLIGHT_TRAIN_BURN")
+                .is_none_or(|v| v.is_empty() || v == "0"),
         }
     }
 }
@@ -432,15 +469,17 @@ pub fn time_epochs(
 }
 
 /// The mean loss over the windows `ids` and every tensor's gradient (flattened) at `cfg`'s
-/// initial weights, with the minibatch split over the cores as in training (`split`) or whole:
-/// for the test that the two agree.
+/// initial weights by burn's autodiff, with the minibatch split over the cores as burn trains
+/// it (`split`) or whole: for the test that the two agree.
 pub fn initial_gradients(
     cfg: &TrainConfig,
     data: &Windows,
     ids: &[usize],
     split: bool,
 ) -> (f64, Vec<Vec<f32>>) {
-    let t = Trainer::new(cfg, data, &Device::flex());
+    let mut t = Trainer::new(cfg, data, &Device::flex());
+    // burn's shards, not the fused kernel: this is what the shards are tested by.
+    t.fused = false;
     let (loss, g) = if split {
         t.loss_and_grads(ids)
     } else {
