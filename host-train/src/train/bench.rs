@@ -26,6 +26,10 @@ pub struct BenchArgs {
     /// (each head on its own, J⁻¹ recomputed).
     #[arg(long)]
     pub reference: bool,
+    /// Time burn's autodiff of the fused tensor ops (the trainer before the hand-fused kernel,
+    /// `train::fused`) instead of the kernel.
+    #[arg(long)]
+    pub burn: bool,
 }
 
 /// One batch size's timing.
@@ -81,7 +85,14 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             batch,
             ..cfg.clone()
         };
-        let mut runs = r#loop::time_epochs(&c, &windows, &ids, args.epochs + 1, args.reference);
+        let mut runs = r#loop::time_epochs(
+            &c,
+            &windows,
+            &ids,
+            args.epochs + 1,
+            args.reference,
+            args.burn,
+        );
         runs.remove(0);
         let mut t: Vec<f64> = runs.iter().map(|r| r.0).collect();
         t.sort_by(f64::total_cmp);
@@ -95,9 +106,15 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             median_cpu_s: cpu.get(cpu.len() / 2).copied(),
         };
         println!(
-            "hamflight{} (burn flex) hidden={} p={} windows={} N={} batch={}: \
+            "hamflight ({}) hidden={} p={} windows={} N={} batch={}: \
              epoch median {:.3} s (min {:.3}, max {:.3}), CPU {}",
-            if args.reference { " reference" } else { "" },
+            if args.reference {
+                "burn flex, reference ops"
+            } else if args.burn {
+                "burn flex"
+            } else {
+                "fused kernel"
+            },
             cfg.hidden,
             cfg.features,
             ids.len(),

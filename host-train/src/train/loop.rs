@@ -447,17 +447,20 @@ impl<'a> Trainer<'a> {
 
 /// Wall time and process CPU time (s, all threads; `None` where /proc is not readable) of
 /// each of `epochs` training epochs over `ids` at `cfg`'s batch size and learning rate
-/// (forward, backward and Adam; no validation): `host-train bench-train`. `reference` times
-/// [`batch_loss_reference`] instead of [`batch_loss`].
+/// (forward, backward and Adam; no validation): `host-train bench-train`. The loss and its
+/// gradient come from the hand-fused kernel ([`super::fused`]), or from burn's autodiff of
+/// [`batch_loss`] (`burn`) or of [`batch_loss_reference`] (`reference`).
 pub fn time_epochs(
     cfg: &TrainConfig,
     data: &Windows,
     ids: &[usize],
     epochs: usize,
     reference: bool,
+    burn: bool,
 ) -> Vec<(f64, Option<f64>)> {
     let mut t = Trainer::new(cfg, data, &Device::flex());
     t.reference = reference;
+    t.fused = t.fused && !burn && !reference;
     (0..epochs)
         .map(|_| {
             let (t0, c0) = (Instant::now(), process_cpu_s());
