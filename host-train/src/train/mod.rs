@@ -7,6 +7,8 @@
 //! - [`r#loop`]: Adam, the epoch loop, the progress bar;
 //! - [`bench`]: `host-train bench-train`, seconds per epoch at several batch sizes;
 //! - [`blackbox`]: issue 4's black-box MLP baseline and the data-efficiency comparison;
+//! - [`fused`]: the loss and its exact gradient as one hand-fused f32 kernel, what training
+//!   runs (burn's autodiff of [`model`] is its reference);
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
 
 pub mod bench;
