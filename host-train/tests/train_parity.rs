@@ -354,10 +354,10 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The hand-fused kernel (`train::fused`) gives the burn path's loss and gradients, on
-/// collected data, with and without the per-flight rotor gains: at the initial weights, and at
-/// weights and per-flight parameters moved off them (nonzero a_j and δηⱼ, so that the W head
-/// and every term of the rotor gains' path carry a gradient).
+/// The hand-fused kernel (`train::fused`) gives the burn path's loss and gradients on
+/// collected data: with and without the per-flight rotor gains, for two window lengths, at the
+/// initial weights and at weights and per-flight parameters moved off them (nonzero a_j and δηⱼ,
+/// so that the W head and every term of the rotor gains' path carry a gradient).
 #[test]
 fn fused_kernel_gradients_equal_burns() {
     use host_train::collect::{collect, CollectConfig};
@@ -371,9 +371,14 @@ fn fused_kernel_gradients_equal_burns() {
         ..CollectConfig::default()
     };
     collect(&dir, &cc).expect("collect");
-    for rotor_gains in [false, true] {
+    // The paper's windows of 5 states with and without rotor gains, and windows of 3 states.
+    for (rotor_gains, len) in [(false, 5), (true, 5), (true, 3)] {
         let cfg = TrainConfig {
             flight_rotor_gains: rotor_gains,
+            window: host_train::dataset::WindowSpec {
+                len,
+                ..Default::default()
+            },
             ..TrainConfig::default()
         };
         let windows = data::load(&dir, cfg.window).expect("load");
@@ -391,10 +396,16 @@ fn fused_kernel_gradients_equal_burns() {
         for (what, params) in [("initial", &init), ("moved", &moved)] {
             let (l_burn, g_burn) = gradients_at(&cfg, &windows, &ids, params, false);
             let (l_fused, g_fused) = gradients_at(&cfg, &windows, &ids, params, true);
-            let tag = format!("rotor gains {rotor_gains}, {what} weights");
+            let tag = format!("rotor gains {rotor_gains}, {len} states, {what} weights");
+            eprintln!(
+                "{tag}: loss relative difference {:.2e}",
+                (l_fused - l_burn).abs() / l_burn
+            );
             assert!(l_burn.is_finite() && l_burn > 0.0, "{tag}: loss {l_burn}");
+            // Measured: loss within 2.5e-7 of burn's, gradients within 1e-6 (rounding; without
+            // the VJP's second-order term the J⁻¹ head's were 6 % off).
             assert!(
-                (l_fused - l_burn).abs() <= 1e-4 * l_burn,
+                (l_fused - l_burn).abs() <= 1e-6 * l_burn,
                 "{tag}: loss {l_fused} vs {l_burn}"
             );
             assert_eq!(g_fused.len(), g_burn.len());
@@ -406,7 +417,7 @@ fn fused_kernel_gradients_equal_burns() {
                 if what == "moved" {
                     assert!(norm > 0.0, "{tag}: tensor {k} has a zero gradient");
                 }
-                assert!(e < 1e-3, "{tag}: gradient of tensor {k} off by {e}");
+                assert!(e < 3e-6, "{tag}: gradient of tensor {k} off by {e}");
             }
         }
     }
