@@ -361,6 +361,7 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
 #[test]
 fn fused_kernel_gradients_equal_burns() {
     use host_train::collect::{collect, CollectConfig};
+    use host_train::train::fused::Isa;
     use host_train::train::r#loop::{gradients_at, initial_params};
     use host_train::train::{data, TrainConfig};
     let dir = train_common::scratch("fused-grads");
@@ -394,8 +395,16 @@ fn fused_kernel_gradients_equal_burns() {
             }
         }
         for (what, params) in [("initial", &init), ("moved", &moved)] {
-            let (l_burn, g_burn) = gradients_at(&cfg, &windows, &ids, params, false);
-            let (l_fused, g_fused) = gradients_at(&cfg, &windows, &ids, params, true);
+            let (l_burn, g_burn) = gradients_at(&cfg, &windows, &ids, params, None);
+            let (l_fused, g_fused) = gradients_at(&cfg, &windows, &ids, params, Some(Isa::Best));
+            // The baseline build of the kernel (what a CPU without AVX2 runs): the same
+            // arithmetic in the same order, so the same values.
+            let (l_base, g_base) = gradients_at(&cfg, &windows, &ids, params, Some(Isa::Baseline));
+            assert_eq!(l_base, l_fused, "{what} weights: baseline vs vector loss");
+            assert_eq!(
+                g_base, g_fused,
+                "{what} weights: baseline vs vector gradients"
+            );
             let tag = format!("rotor gains {rotor_gains}, {len} states, {what} weights");
             eprintln!(
                 "{tag}: loss relative difference {:.2e}",

@@ -1233,6 +1233,29 @@ pub fn loss_and_grads(
     vel_weight: f32,
     threads: usize,
 ) -> Option<(f64, Vec<Vec<f32>>)> {
+    loss_and_grads_on(data, ids, params, dt_s, vel_weight, threads, Isa::Best)
+}
+
+/// The instruction set the kernel runs with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    /// The best the CPU has (AVX-512VL, AVX2 or the baseline; [`loss_and_grads`]).
+    Best,
+    /// The build's baseline target (on x86_64 SSE2), whatever the CPU has: for the test of the
+    /// path other CPUs take.
+    Baseline,
+}
+
+/// [`loss_and_grads`] with the instruction set `isa`.
+pub fn loss_and_grads_on(
+    data: &Windows,
+    ids: &[usize],
+    params: &[Vec<f32>],
+    dt_s: f32,
+    vel_weight: f32,
+    threads: usize,
+    isa: Isa,
+) -> Option<(f64, Vec<Vec<f32>>)> {
     if params.len() != 19 || ids.is_empty() || data.window_len < 2 {
         return None;
     }
@@ -1280,7 +1303,11 @@ pub fn loss_and_grads(
         };
         for ids in part {
             let gr = Group::load(data, ids, batch);
-            group_dispatch(&k, &nets, pf, width, &gr, &mut sc, &mut g);
+            if isa == Isa::Baseline {
+                group(&k, &nets, pf, width, &gr, &mut sc, &mut g);
+            } else {
+                group_dispatch(&k, &nets, pf, width, &gr, &mut sc, &mut g);
+            }
         }
         g
     };

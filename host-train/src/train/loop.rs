@@ -506,8 +506,9 @@ pub fn initial_params(cfg: &TrainConfig, data: &Windows) -> Vec<Vec<f32>> {
 }
 
 /// The mean loss over the windows `ids` and every tensor's gradient (flattened) at `params`
-/// ([`initial_params`]' layout), by the burn path on one graph or by the hand-fused kernel
-/// ([`super::fused::loss_and_grads`] on the cores, `fused`): for the test that they agree.
+/// ([`initial_params`]' layout), by the burn path on one graph (`fused` None) or by the
+/// hand-fused kernel on the cores with the instruction set `fused`
+/// ([`super::fused::loss_and_grads_on`]): for the test that they agree.
 ///
 /// # Panics
 /// When `params` do not have the trainer's shapes.
@@ -516,14 +517,22 @@ pub fn gradients_at(
     data: &Windows,
     ids: &[usize],
     params: &[Vec<f32>],
-    fused: bool,
+    fused: Option<super::fused::Isa>,
 ) -> (f64, Vec<Vec<f32>>) {
     let mut t = Trainer::new(cfg, data, &Device::flex());
     assert_eq!(params.len(), t.params.len(), "parameter count");
-    if fused {
+    if let Some(isa) = fused {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        return super::fused::loss_and_grads(data, ids, params, t.dt_s, cfg.vel_weight, cores)
-            .expect("the fused kernel takes the core's sizes");
+        return super::fused::loss_and_grads_on(
+            data,
+            ids,
+            params,
+            t.dt_s,
+            cfg.vel_weight,
+            cores,
+            isa,
+        )
+        .expect("the fused kernel takes the core's sizes");
     }
     for (p, v) in t.params.iter_mut().zip(params) {
         let dims = p.dims();
