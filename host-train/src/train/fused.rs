@@ -594,11 +594,11 @@ fn rhs(
         }
         s * WRENCH_SCALE[row]
     });
-    let dy_ = &pt.td.y;
+    let feat = &pt.td.y;
     let oa: [V; 6] = vs(|row| {
         let mut s = V::ZERO;
         for c in 0..P {
-            s += dy_[row * P + c] * a[c];
+            s += feat[row * P + c] * a[c];
         }
         s
     });
@@ -656,10 +656,10 @@ fn rhs(
     // Ṙ = R ω̂, ω̂ = [[0, −w₂, w₁], [w₂, 0, −w₀], [−w₁, w₀, 0]].
     let mut r_dot = [V::ZERO; 9];
     for i in 0..3 {
-        let (a0_, a1_, a2_) = (r[i * 3], r[i * 3 + 1], r[i * 3 + 2]);
-        r_dot[i * 3] = a1_ * w[2] - a2_ * w[1];
-        r_dot[i * 3 + 1] = a2_ * w[0] - a0_ * w[2];
-        r_dot[i * 3 + 2] = a0_ * w[1] - a1_ * w[0];
+        let (x, y, z) = (r[i * 3], r[i * 3 + 1], r[i * 3 + 2]);
+        r_dot[i * 3] = y * w[2] - z * w[1];
+        r_dot[i * 3 + 1] = z * w[0] - x * w[2];
+        r_dot[i * 3 + 2] = x * w[1] - y * w[0];
     }
     *rec = Rhs {
         pv: *pv,
@@ -961,13 +961,13 @@ fn group(k: &K, n: &Nets, pf: &[f32], width: usize, gr: &Group, sc: &mut Scratch
     eval_point(n, &gr.r[0], &mut sc.pts[0]);
     let jm = sc.pts[0].j;
     let row = |i: usize| [jm[i * 3], jm[i * 3 + 1], jm[i * 3 + 2]];
-    let (ra, rb_, rc) = (row(0), row(1), row(2));
-    let bc = cross(&rb_, &rc);
-    let ca = cross(&rc, &ra);
-    let ab_ = cross(&ra, &rb_);
-    let det = ra[0] * bc[0] + ra[1] * bc[1] + ra[2] * bc[2];
-    // inv[i][j] = [bc, ca, ab][j][i] / det.
-    let cols = [bc, ca, ab_];
+    let (ra, rb, rc) = (row(0), row(1), row(2));
+    let bxc = cross(&rb, &rc);
+    let cxa = cross(&rc, &ra);
+    let axb = cross(&ra, &rb);
+    let det = ra[0] * bxc[0] + ra[1] * bxc[1] + ra[2] * bxc[2];
+    // inv[i][j] = [b × c, c × a, a × b][j][i] / det.
+    let cols = [bxc, cxa, axb];
     let inv: [V; 9] = vs(|e| cols[e % 3][e / 3] / det);
     let w0 = &gr.w[0];
     let pw0: [V; 3] = vs(|i| inv[i * 3] * w0[0] + inv[i * 3 + 1] * w0[1] + inv[i * 3 + 2] * w0[2]);
