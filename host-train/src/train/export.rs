@@ -85,6 +85,10 @@ pub struct TrainReport {
     pub curve: Vec<EpochStats>,
     /// Held-out errors: learned model with its a_j.
     pub heldout_learned: PredictionErrors,
+    /// Held-out errors of the training model with rotor gains: the main stage's J⁻¹, g, W and
+    /// a_j with each flight's rotor gains (null without them). The flying model is
+    /// `heldout_learned`: the shared g cannot bend to one flight's rotors.
+    pub heldout_learned_rotor_gains: Option<PredictionErrors>,
     /// Held-out errors: learned model with a = 0 (no disturbance compensation).
     pub heldout_learned_no_disturbance: PredictionErrors,
     /// Held-out errors on the disturbance-free flights' windows only: learned (a = 0) and the
@@ -126,6 +130,22 @@ pub fn prediction_errors<M: HamiltonianModel>(
     ids: &[usize],
     a: Option<&[[f32; FEATURES]]>,
 ) -> PredictionErrors {
+    prediction_errors_with_rotor_gains(model, data, ids, a, &[])
+}
+
+/// [`prediction_errors`] with each flight's command realized through its rotor gains δηⱼ
+/// (A diag(1 + δηⱼ) A⁻¹ u, [`rotor_scaling`]; a flight without an entry gets none).
+pub fn prediction_errors_with_rotor_gains<M: HamiltonianModel>(
+    model: &M,
+    data: &Windows,
+    ids: &[usize],
+    a: Option<&[[f32; FEATURES]]>,
+    rotor_gain: &[[f32; 4]],
+) -> PredictionErrors {
+    let scalings: Vec<nalgebra::Matrix4<f32>> = rotor_gain
+        .iter()
+        .map(|d| rotor_scaling(&d.map(|x| 1.0 + x)))
+        .collect();
     let dt = 1.0 / data.sample_hz;
     let n = data.window_len - 1;
     let mut acc = vec![[0f64; 4]; n];
@@ -136,7 +156,9 @@ pub fn prediction_errors<M: HamiltonianModel>(
             .unwrap_or([0.0; FEATURES]);
         let mut s = w.states[0];
         for (k, acc) in acc.iter_mut().enumerate() {
-            s = rk4_step(model, &s, &Vector4::from(w.u[k]), &aj, dt);
+            let u = Vector4::from(w.u[k]);
+            let u = scalings.get(w.realization).map_or(u, |m| m * u);
+            s = rk4_step(model, &s, &u, &aj, dt);
             let t = &w.states[k + 1];
             acc[0] += f64::from((s.p_m - t.p_m).norm_squared());
             acc[1] += f64::from(lie::geodesic_distance(&t.rot, &s.rot)).powi(2);
@@ -290,6 +312,15 @@ pub fn report(
         train_time_s: trained.curve.last().map_or(0.0, |e| e.elapsed_s),
         curve: trained.curve.clone(),
         heldout_learned: prediction_errors(&learned, data, heldout, Some(&trained.a)),
+        heldout_learned_rotor_gains: trained.main_stage.as_ref().map(|m| {
+            prediction_errors_with_rotor_gains(
+                &LearnedModel::new(m.weights),
+                data,
+                heldout,
+                Some(&m.a),
+                &trained.rotor_gain,
+            )
+        }),
         heldout_learned_no_disturbance: prediction_errors(&learned, data, heldout, None),
         heldout_calm: calm_errors(&learned, &nominal, data, heldout),
         heldout_nominal: prediction_errors(&nominal, data, heldout, None),

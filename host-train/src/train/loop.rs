@@ -40,10 +40,21 @@ pub struct Trained {
     /// Each realization's rotor gain deviations δηⱼ (rotor i realizes 1 + δηⱼᵢ of its
     /// command; [`TrainConfig::flight_rotor_gains`]); empty when not learned.
     pub rotor_gain: Vec<[f32; ROTOR_GAINS]>,
+    /// With rotor gains: the main stage's model and a_j, the training model that, with
+    /// [`Trained::rotor_gain`], explains each flight (before the feature stage refits W).
+    pub main_stage: Option<MainStage>,
     /// The training curve.
     pub curve: Vec<EpochStats>,
     /// Held-out loss of the initial (prior) model.
     pub initial_val_loss: f64,
+}
+
+/// The main stage's result when rotor gains are learned ([`Trained::main_stage`]).
+pub struct MainStage {
+    /// θ and φ after the main stage.
+    pub weights: ModelWeights,
+    /// Its a_j per realization.
+    pub a: Vec<[f32; FEATURES]>,
 }
 
 /// Initial weights: hidden layers Xavier-uniform from `seed`, output layers scaled by
@@ -629,26 +640,33 @@ pub fn train(
         t.params = best.1;
     }
     let rotor_gain = rotor_gains_of(&t.params[n_net]);
+    let main_stage = (!rotor_gain.is_empty()).then(|| MainStage {
+        weights: TModel::from_tensors(&t.params[..n_net]).to_core(&c_plain),
+        a: a_of(&t.params[n_net]),
+    });
     if !rotor_gain.is_empty() && cfg.feature_epochs > 0 {
         bar.inc_length(cfg.feature_epochs as u64);
         feature_stage(&mut t, cfg, &val, &mut curve, &record, train);
     }
     bar.finish();
     let model = TModel::from_tensors(&t.params[..n_net]);
-    let per_flight = &t.params[n_net];
-    let width = per_flight.dims()[1];
-    let flat = to_vec(per_flight);
-    let a = flat
-        .chunks_exact(width)
-        .map(|c| std::array::from_fn(|k| c[k]))
-        .collect();
     Trained {
         weights: model.to_core(&c_plain),
-        a,
+        a: a_of(&t.params[n_net]),
         rotor_gain,
+        main_stage,
         curve,
         initial_val_loss,
     }
+}
+
+/// The a_j in the per-flight tensor [M, p] or [M, p + 4].
+fn a_of(per_flight: &Tensor<2>) -> Vec<[f32; FEATURES]> {
+    let width = per_flight.dims()[1];
+    to_vec(per_flight)
+        .chunks_exact(width)
+        .map(|c| std::array::from_fn(|k| c[k]))
+        .collect()
 }
 
 /// The rotor gain deviations δηⱼ in the per-flight tensor [M, p + 4] (empty for [M, p]).
