@@ -224,6 +224,25 @@ pub fn rotor_scaling(eff: &[f32; 4]) -> nalgebra::Matrix4<f32> {
     a * nalgebra::Matrix4::from_diagonal(&Vector4::from(*eff)) * a_inv
 }
 
+/// The rotor maps in the training model's units, in row form (a row x maps to x · M, M stored
+/// row-major): u/CONTROL_SCALE → the CF2X's rotor thrusts (A⁻¹ S), and back (S⁻¹ A); S is
+/// diag(CONTROL_SCALE). A flight's rotor gains act between them ([`rotor_scaling`]).
+pub fn normalized_rotor_maps() -> ([[f32; 4]; 4], [[f32; 4]; 4]) {
+    let mixer = rotor_mixer();
+    let scale =
+        nalgebra::Matrix4::from_diagonal(&Vector4::from(hamflight::model::learned::CONTROL_SCALE));
+    let mixer_inv = mixer
+        .try_inverse()
+        .unwrap_or_else(nalgebra::Matrix4::identity);
+    let scale_inv = scale
+        .try_inverse()
+        .unwrap_or_else(nalgebra::Matrix4::identity);
+    let row_form = |m: nalgebra::Matrix4<f32>| -> [[f32; 4]; 4] {
+        std::array::from_fn(|i| std::array::from_fn(|j| m[(j, i)]))
+    };
+    (row_form(mixer_inv * scale), row_form(scale_inv * mixer))
+}
+
 /// The true input gain g (R = I) of the CF2X airframe whose rotors make `eff` of their nominal
 /// thrust: the realized wrench per unit of commanded wrench (the mixer inverse, the rotors'
 /// factors, the mixer), force rows times `model_mass_kg / true_mass_kg`.

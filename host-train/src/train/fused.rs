@@ -356,24 +356,13 @@ struct K {
 
 impl K {
     fn new(mass_kg: f32, dt_s: f32, vel_weight: f32) -> Self {
-        let mixer = super::export::rotor_mixer();
-        let scale = nalgebra::Matrix4::from_diagonal(&nalgebra::Vector4::from(CONTROL_SCALE));
-        let mixer_inv = mixer
-            .try_inverse()
-            .unwrap_or_else(nalgebra::Matrix4::identity);
-        let scale_inv = scale
-            .try_inverse()
-            .unwrap_or_else(nalgebra::Matrix4::identity);
-        // The same row form as `Consts::new`: x · Mᵀ.
-        let row_form = |m: nalgebra::Matrix4<f32>| -> [[f32; 4]; 4] {
-            std::array::from_fn(|i| std::array::from_fn(|j| m[(j, i)]))
-        };
+        let (rfu, ufr) = super::export::normalized_rotor_maps();
         Self {
             mass_kg,
             dt_s,
             vel_weight,
-            rfu: row_form(mixer_inv * scale),
-            ufr: row_form(scale_inv * mixer),
+            rfu,
+            ufr,
             cinv: CONTROL_SCALE.map(|c| 1.0 / c),
         }
     }

@@ -291,41 +291,35 @@ pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
         r.initial_val_loss,
         r.final_val_loss
     );
+    let errs = |e: &export::PredictionErrors| {
+        format!(
+            "{:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            last(&e.pos_m),
+            last(&e.rot_rad),
+            last(&e.vel_m_s),
+            last(&e.rate_rad_s)
+        )
+    };
     println!(
-        "held-out {}-step error (pos m / rot rad / vel m/s / rate rad/s): learned {:.2e} / {:.2e} / {:.2e} / {:.2e}, nominal {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+        "held-out {}-step error (pos m / rot rad / vel m/s / rate rad/s): learned {}, nominal {}",
         r.heldout_learned.pos_m.len(),
-        last(&r.heldout_learned.pos_m),
-        last(&r.heldout_learned.rot_rad),
-        last(&r.heldout_learned.vel_m_s),
-        last(&r.heldout_learned.rate_rad_s),
-        last(&r.heldout_nominal.pos_m),
-        last(&r.heldout_nominal.rot_rad),
-        last(&r.heldout_nominal.vel_m_s),
-        last(&r.heldout_nominal.rate_rad_s),
+        errs(&r.heldout_learned),
+        errs(&r.heldout_nominal),
     );
     if let Some(n) = &r.heldout_nominal_true_vehicle {
         println!(
-            "held-out {}-step error of the nominal model with the dataset's mass and inertia: {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            "held-out {}-step error of the nominal model with the dataset's mass and inertia: {}",
             n.pos_m.len(),
-            last(&n.pos_m),
-            last(&n.rot_rad),
-            last(&n.vel_m_s),
-            last(&n.rate_rad_s),
+            errs(n),
         );
     }
     if let Some(c) = &r.heldout_calm {
         println!(
-            "held-out {}-step error on the {} windows of disturbance-free flights: learned {:.2e} / {:.2e} / {:.2e} / {:.2e}, nominal {:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            "held-out {}-step error on the {} windows of disturbance-free flights: learned {}, nominal {}",
             c.learned.pos_m.len(),
             c.windows,
-            last(&c.learned.pos_m),
-            last(&c.learned.rot_rad),
-            last(&c.learned.vel_m_s),
-            last(&c.learned.rate_rad_s),
-            last(&c.nominal.pos_m),
-            last(&c.nominal.rot_rad),
-            last(&c.nominal.vel_m_s),
-            last(&c.nominal.rate_rad_s),
+            errs(&c.learned),
+            errs(&c.nominal),
         );
     }
     if let Some(c) = &r.flight_check {

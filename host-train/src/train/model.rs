@@ -204,19 +204,9 @@ impl Consts {
         set(&mut h, 1, 6, -1.0);
         set(&mut h, 0, 7, 1.0);
         let cinv: Vec<f32> = CONTROL_SCALE.iter().map(|c| 1.0 / c).collect();
-        let mixer = super::export::rotor_mixer();
-        let scale = nalgebra::Matrix4::from_diagonal(&nalgebra::Vector4::from(CONTROL_SCALE));
-        let mixer_inv = mixer
-            .try_inverse()
-            .unwrap_or_else(nalgebra::Matrix4::identity);
-        let scale_inv = scale
-            .try_inverse()
-            .unwrap_or_else(nalgebra::Matrix4::identity);
-        // Row-vector form: x · Mᵀ, stored row-major.
-        let row_form = |m: nalgebra::Matrix4<f32>| {
-            let v: Vec<f32> = (0..16).map(|k| m[(k % 4, k / 4)]).collect();
-            Tensor::from_data(TensorData::new(v, [4, 4]), device)
-        };
+        let (rotor_from_u, u_from_rotor) = super::export::normalized_rotor_maps();
+        let row_form =
+            |m: [[f32; 4]; 4]| Tensor::from_data(TensorData::new(m.concat(), [4, 4]), device);
         Self {
             l_map: Tensor::from_data(TensorData::new(l, [6, 9]), device),
             l_map_t: Tensor::from_data(TensorData::new(lt, [9, 6]), device),
@@ -226,8 +216,8 @@ impl Consts {
                 .mul_scalar(INERTIA_INV_EPS),
             wrench_scale: Tensor::from_data(TensorData::new(WRENCH_SCALE.to_vec(), [1, 6]), device),
             control_inv_scale: Tensor::from_data(TensorData::new(cinv, [1, 4]), device),
-            rotor_from_u: row_form(mixer_inv * scale),
-            u_from_rotor: row_form(scale_inv * mixer),
+            rotor_from_u: row_form(rotor_from_u),
+            u_from_rotor: row_form(u_from_rotor),
             mass_kg,
         }
     }
