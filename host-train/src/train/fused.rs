@@ -284,6 +284,51 @@ fn mlp_fwd<const O: usize>(w: &Head<O>, x: &[V; 9], t: &mut Tr<O>) {
     t.y = y;
 }
 
+/// The reverse of a dense layer y = xᵀ W (W `[R][C]`) for the weights and the input: with the
+/// output adjoint `yb` [C], adds x_r yb_c to `gw[r][c]` and returns the input adjoint
+/// xb_r = `xb0[r]` + Σ_c yb_c W[r][c] (`xb0`: what the input already carries).
+#[inline(always)]
+fn dense_back<const R: usize, const C: usize>(
+    w: &[[f32; C]; R],
+    x: &[V; R],
+    yb: &[V; C],
+    xb0: &[V; R],
+    gw: &mut [[V; C]; R],
+) -> [V; R] {
+    let mut xb = *xb0;
+    for r in 0..R {
+        let xr = x[r];
+        let mut s = xb[r];
+        for c in 0..C {
+            gw[r][c] += xr * yb[c];
+            s += yb[c] * w[r][c];
+        }
+        xb[r] = s;
+    }
+    xb
+}
+
+/// The reverse of the transposed layer d = W u (W `[R][C]`, u [C], as in a VJP) for the
+/// weights and u: with the adjoint `db` [R] of d and `u` recorded, adds db_r u_c to
+/// `gw[r][c]` and returns u's adjoint ub_c = Σ_r db_r W[r][c].
+#[inline(always)]
+fn dense_t_back<const R: usize, const C: usize>(
+    w: &[[f32; C]; R],
+    u: &[V; C],
+    db: &[V; R],
+    gw: &mut [[V; C]; R],
+) -> [V; C] {
+    let mut ub = [V::ZERO; C];
+    for r in 0..R {
+        let dr = db[r];
+        for c in 0..C {
+            gw[r][c] += dr * u[c];
+            ub[c] += dr * w[r][c];
+        }
+    }
+    ub
+}
+
 /// The reverse of [`mlp_fwd`] with output adjoint `yb` and extra adjoints of the hidden
 /// activations `h1x`, `h0x` (from the VJP's use of them); adds the input's adjoint to `xb`.
 #[inline(always)]
@@ -300,45 +345,19 @@ fn mlp_back<const O: usize>(
     for (b, y) in g.b2.iter_mut().zip(yb) {
         *b += *y;
     }
-    let mut h1b = *h1x;
-    for j in 0..H {
-        let h = t.h1[j];
-        let mut s = h1b[j];
-        for k in 0..O {
-            g.w2[j][k] += h * yb[k];
-            s += yb[k] * w.w2[j][k];
-        }
-        h1b[j] = s;
-    }
+    let h1b = dense_back(&w.w2, &t.h1, yb, h1x, &mut g.w2);
     let mut z1b = [V::ZERO; H];
     for j in 0..H {
         z1b[j] = h1b[j] * t.h1[j].one_minus_sq();
         g.b1[j] += z1b[j];
     }
-    let mut h0b = *h0x;
-    for i in 0..H {
-        let h = t.h0[i];
-        let mut s = h0b[i];
-        for j in 0..H {
-            g.w1[i][j] += h * z1b[j];
-            s += z1b[j] * w.w1[i][j];
-        }
-        h0b[i] = s;
-    }
+    let h0b = dense_back(&w.w1, &t.h0, &z1b, h0x, &mut g.w1);
     let mut z0b = [V::ZERO; H];
     for i in 0..H {
         z0b[i] = h0b[i] * t.h0[i].one_minus_sq();
         g.b0[i] += z0b[i];
     }
-    for m in 0..9 {
-        let xm = x[m];
-        let mut s = xb[m];
-        for i in 0..H {
-            g.w0[m][i] += xm * z0b[i];
-            s += z0b[i] * w.w0[m][i];
-        }
-        xb[m] = s;
-    }
+    *xb = dense_back(&w.w0, x, &z0b, xb, &mut g.w0);
 }
 
 /// Constants of the equations.
@@ -771,42 +790,21 @@ fn rhs_back(
     }
     // The VJP d = W₀ᵀ (s₀ ⊙ W₁ᵀ (s₁ ⊙ W₂ᵀ dy)), second order through s = 1 − h².
     let hi = &n.i;
-    let mut g0b = [V::ZERO; H];
-    for mm in 0..9 {
-        let dm = db[mm];
-        for i in 0..H {
-            gi.w0[mm][i] += dm * rec.g0[i];
-            g0b[i] += dm * hi.w0[mm][i];
-        }
-    }
+    let g0b = dense_t_back(&hi.w0, &rec.g0, &db, &mut gi.w0);
     let mut a0b = [V::ZERO; H];
     for i in 0..H {
         let h = pt.ti.h0[i];
         a0b[i] = g0b[i] * h.one_minus_sq();
         pa.h0x[i] -= g0b[i] * rec.a0[i] * h * 2.0;
     }
-    let mut g1b = [V::ZERO; H];
-    for i in 0..H {
-        let ai = a0b[i];
-        for j in 0..H {
-            gi.w1[i][j] += ai * rec.g1[j];
-            g1b[j] += ai * hi.w1[i][j];
-        }
-    }
+    let g1b = dense_t_back(&hi.w1, &rec.g1, &a0b, &mut gi.w1);
     let mut a1b = [V::ZERO; H];
     for j in 0..H {
         let h = pt.ti.h1[j];
         a1b[j] = g1b[j] * h.one_minus_sq();
         pa.h1x[j] -= g1b[j] * rec.a1[j] * h * 2.0;
     }
-    let mut dyb = [V::ZERO; OI];
-    for j in 0..H {
-        let aj = a1b[j];
-        for kk in 0..OI {
-            gi.w2[j][kk] += aj * rec.dy[kk];
-            dyb[kk] += aj * hi.w2[j][kk];
-        }
-    }
+    let dyb = dense_t_back(&hi.w2, &rec.dy, &a1b, &mut gi.w2);
     // dy = s 𝔭ᵢ zⱼ, z = Lᵀ 𝔭_ω.
     let pw = &rec.pw;
     let mut zb = [V::ZERO; 3];
