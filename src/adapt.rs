@@ -237,10 +237,14 @@ struct PredictionState {
     /// Whether `prev_*` hold a tick (false after a reset or a fault).
     has_prev: bool,
     /// The filtered measured disturbance force (a's units) and the filtered scaled features.
-    z_f: Vector6<f32>,
-    h_f: SMatrix<f32, 6, FEATURES>,
+    z_f: [f32; 6],
+    /// Row-major: `h_f[r]` is row r of the scaled features (the Kalman update's measurement
+    /// rows).
+    h_f: [[f32; FEATURES]; 6],
     /// Whether the filters hold a sample.
     has_filter: bool,
+    /// The prediction error of the last update (a's units), for diagnostics.
+    eps: Option<[f32; 6]>,
 }
 
 /// The online estimate a of the disturbance weights, and the composite law's gain P.
@@ -422,100 +426,212 @@ impl Adaptation {
         let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
         let d_v = match x.measurement.acc_body_m_s2 {
-            Some(acc) if acc.iter().all(|c| c.is_finite()) => acc * m - gu_v,
+            Some(acc) if crate::fpu::all_finite(acc.iter().copied()) => acc * m - gu_v,
             _ => {
-                (v - prev_v) * (m / dt_s) - v.cross(&w) * m
-                    + x.rot.transpose() * Vector3::z() * (m * x.gravity_m_s2)
-                    - gu_v
+                // Rᵀ e₃ is the third row of R.
+                let up = Vector3::new(x.rot.m31, x.rot.m32, x.rot.m33);
+                (v - prev_v) * (m / dt_s) - v.cross(&w) * m + up * (m * x.gravity_m_s2) - gu_v
             }
         };
         let jw = x.inertia * w;
-        let d_w = x.inertia * (w - prev_w) / dt_s - jw.cross(&w) - gu_w;
+        let d_w = x.inertia * ((w - prev_w) * (1.0 / dt_s)) - jw.cross(&w) - gu_w;
         // Scale the rows to a's units.
         let (sf, st) = (1.0 / m, 1.0 / TORQUE_UNIT_NM);
-        let z = Vector6::new(
+        let z = [
             d_v.x * sf,
             d_v.y * sf,
             d_v.z * sf,
             d_w.x * st,
             d_w.y * st,
             d_w.z * st,
-        );
-        let mut h = *x.features;
-        for c in 0..FEATURES {
-            for r in 0..6 {
-                let s = if r < 3 { sf } else { st };
-                if let Some(e) = h.get_mut((r, c)) {
-                    *e *= s;
-                }
+        ];
+        // The same first-order low-pass on both sides, the feature rows scaled as z's in the
+        // same pass: h_f ← h_f + (s W − h_f) α. The first sample has α = 1 on zeroed filters,
+        // which gives h_f = s W exactly. A non-finite feature shows as a non-finite sᵢ in the
+        // Kalman update, a non-finite z as a non-finite a after it: either drops the update and
+        // zeroes the filters for a fresh start.
+        let alpha = if self.pred.has_filter {
+            dt_s / (gains.filter_tau_s.max(0.0) + dt_s)
+        } else {
+            1.0
+        };
+        let scale = [sf, sf, sf, st, st, st];
+        for (r, (hr, sc)) in self.pred.h_f.iter_mut().zip(scale.iter()).enumerate() {
+            for (c, h) in hr.iter_mut().enumerate() {
+                let target = x.features.get((r, c)).copied().unwrap_or(0.0) * sc;
+                *h += (target - *h) * alpha;
             }
         }
-        if !(finite(&z) && finite(&h)) {
-            return None;
+        for (zf, zi) in self.pred.z_f.iter_mut().zip(z.iter()) {
+            *zf += (zi - *zf) * alpha;
         }
-        // The same first-order low-pass on both sides.
-        if self.pred.has_filter {
-            let alpha = dt_s / (gains.filter_tau_s.max(0.0) + dt_s);
-            self.pred.z_f += (z - self.pred.z_f) * alpha;
-            self.pred.h_f += (h - self.pred.h_f) * alpha;
-        } else {
-            self.pred.z_f = z;
-            self.pred.h_f = h;
-            self.pred.has_filter = true;
+        self.pred.has_filter = true;
+        let out = self.kalman(gains, a_max, dt_s);
+        if out.is_none() {
+            // A non-finite feature reached the filter: start it again at the next sample.
+            self.pred.has_filter = false;
+            self.pred.h_f = [[0.0; FEATURES]; 6];
+            self.pred.z_f = [0.0; 6];
         }
-        self.kalman(gains, a_max, dt_s)
+        out
     }
 
     #[cfg(feature = "composite")]
     fn kalman(&mut self, g: &CompositeGains, a_max: f32, dt_s: f32) -> Option<Vector6<f32>> {
-        type M6 = SMatrix<f32, FEATURES, FEATURES>;
-        let h = self.pred.h_f;
-        if self.p == M6::zeros() || !finite(&self.p) {
-            self.p = M6::identity() * g.p0;
-        }
-        // Predict: a random walk.
-        let mut q = SVector::<f32, FEATURES>::repeat(g.q_force);
-        for (i, qi) in q.iter_mut().enumerate() {
-            if i >= 3 {
-                *qi = g.q_torque;
+        // P lives in `self.p` as a full symmetric 6×6 matrix; the updates below work on its
+        // upper triangle and mirror it, so it stays exactly symmetric. Column-major storage:
+        // p[c][r] is P(r, c), and P(r, c) = P(c, r).
+        let mut p = self.p.data.0;
+        let diag_ok = p
+            .iter()
+            .enumerate()
+            .all(|(i, col)| col.get(i).is_some_and(|d| *d > 0.0));
+        if !(diag_ok && crate::fpu::all_finite(p.iter().flatten().copied())) {
+            p = [[0.0; FEATURES]; FEATURES];
+            for (i, col) in p.iter_mut().enumerate() {
+                if let Some(d) = col.get_mut(i) {
+                    *d = g.p0;
+                }
             }
         }
-        let mut p = self.p + M6::from_diagonal(&(q * dt_s));
-        let r = [
-            g.r_force, g.r_force, g.r_force, g.r_torque, g.r_torque, g.r_torque,
-        ];
-        // Update: R is diagonal, so the six rows are six independent scalar measurements,
-        // processed one after the other (exactly the batch update, without a 6×6 solve).
-        let eps = self.pred.z_f - h * self.a;
-        let mut a_next = self.a;
-        for ((hi, zi), ri) in h.row_iter().zip(self.pred.z_f.iter()).zip(r.iter()) {
-            let hi = hi.transpose();
-            let ph = p * hi;
-            let s = hi.dot(&ph) + ri;
-            if !(s > 0.0 && s.is_finite()) {
+        // Predict: a random walk, P ← P + Q dt (Q diagonal: force columns, then torque).
+        let (qf, qt) = (g.q_force * dt_s, g.q_torque * dt_s);
+        for (i, col) in p.iter_mut().enumerate() {
+            if let Some(d) = col.get_mut(i) {
+                *d += if i < 3 { qf } else { qt };
+            }
+        }
+        let rows = &self.pred.h_f;
+        let zf = &self.pred.z_f;
+        let a0: [f32; FEATURES] = self.a.data.0[0];
+        // The prediction error with the estimate before this tick's update.
+        let mut eps = [0.0f32; 6];
+        for ((e, h), z) in eps.iter_mut().zip(rows.iter()).zip(zf.iter()) {
+            *e = z - dot6(h, &a0);
+        }
+        // Update: R is diagonal, so the six rows are six scalar measurements in turn (exactly
+        // the batch update, without a 6×6 solve): s = h P hᵀ + r, k = P hᵀ / s,
+        // a ← a + k (z − h a), P ← P − k (P hᵀ)ᵀ. Only the upper triangle is read and written
+        // here (P(r, c), r ≤ c, is p[c][r]); the lower is mirrored from it at the end, so P
+        // stays exactly symmetric.
+        let mut a = a0;
+        for (i, (h, z)) in rows.iter().zip(zf.iter()).enumerate() {
+            let r = if i < 3 { g.r_force } else { g.r_torque };
+            let ph = sym_mul(&p, h);
+            let s = dot6(h, &ph) + r;
+            if !s.is_finite() {
+                // A non-finite feature: no update this tick.
+                return None;
+            }
+            // s is finite here.
+            if s <= 0.0 {
                 continue;
             }
-            let k = ph / s;
-            a_next += k * (zi - hi.dot(&a_next));
-            // P − P hᵀ h P / s: (ph phᵀ) is exactly symmetric in floating point.
-            p -= (ph * ph.transpose()) * (1.0 / s);
+            let inv = 1.0 / s;
+            // Row 0 sees the estimate before the update: its innovation is ε₀.
+            let e = if i == 0 {
+                eps.first().copied().unwrap_or(0.0)
+            } else {
+                z - dot6(h, &a)
+            };
+            let innovation = e * inv;
+            for (aj, phj) in a.iter_mut().zip(ph.iter()) {
+                *aj += phj * innovation;
+            }
+            let k: [f32; FEATURES] = core::array::from_fn(|j| ph.get(j).map_or(0.0, |v| v * inv));
+            rank1_upper(&mut p, &k, &ph);
         }
-        let mut p_next = p;
-        if (0..FEATURES).any(|i| p_next.get((i, i)).is_none_or(|d| *d <= 0.0)) {
-            // Rounding lost definiteness: start the gain again.
-            p_next = M6::identity() * g.p0;
+        mirror_upper(&mut p);
+        // Positive diagonal (rounding may lose definiteness: start the gain again), bounded
+        // largest diagonal (scaling keeps P positive definite).
+        let mut dmax = 0.0f32;
+        let mut dpos = true;
+        for (i, col) in p.iter().enumerate() {
+            let d = col.get(i).copied().unwrap_or(0.0);
+            dpos &= d > 0.0;
+            dmax = dmax.max(d);
         }
-        let dmax = (0..FEATURES)
-            .filter_map(|i| p_next.get((i, i)).copied())
-            .fold(0.0f32, f32::max);
+        if !dpos {
+            p = [[0.0; FEATURES]; FEATURES];
+            for (i, col) in p.iter_mut().enumerate() {
+                if let Some(d) = col.get_mut(i) {
+                    *d = g.p0;
+                }
+            }
+            dmax = g.p0;
+        }
         if dmax > g.p_max && dmax > 0.0 {
-            p_next *= g.p_max / dmax;
+            let f = g.p_max / dmax;
+            for v in p.iter_mut().flatten() {
+                *v *= f;
+            }
         }
-        if !(finite(&p_next) && finite(&a_next)) {
+        // P is finite here: each update subtracts kᵢ (P hᵀ)ⱼ with |kᵢ (P hᵀ)ⱼ| ≤ √(PᵢᵢPⱼⱼ)
+        // for a finite s (checked) and a finite, positive definite P (checked on entry).
+        if !(crate::fpu::all_finite(a) && dmax.is_finite()) {
             return None;
         }
-        self.p = p_next;
-        self.set_projected(a_next, a_max);
-        Some(eps)
+        self.p.data.0 = p;
+        self.set_projected(SVector::from(a), a_max);
+        self.pred.eps = Some(eps);
+        Some(Vector6::from(eps))
+    }
+
+    /// The composite law's prediction error ε = z_f − h_f a of its last update (a's units:
+    /// force rows in m/s², torque rows in 1e-3 N·m), before that update moved a; `None` before
+    /// the first update and after a reset.
+    pub fn prediction_error(&self) -> Option<Vector6<f32>> {
+        self.pred.eps.map(Vector6::from)
+    }
+}
+
+/// x · y of two 6-vectors, summed in index order.
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn dot6(x: &[f32; FEATURES], y: &[f32; FEATURES]) -> f32 {
+    x.iter().zip(y.iter()).fold(0.0, |acc, (a, b)| acc + a * b)
+}
+
+/// P(min(r, c), max(r, c)) from the upper triangle of a column-major P (p[c][r], r ≤ c).
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn upper(p: &[[f32; FEATURES]; FEATURES], r: usize, c: usize) -> f32 {
+    let (r, c) = if r <= c { (r, c) } else { (c, r) };
+    p.get(c).and_then(|col| col.get(r)).copied().unwrap_or(0.0)
+}
+
+/// P h for a symmetric P of which only the upper triangle is read.
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn sym_mul(p: &[[f32; FEATURES]; FEATURES], h: &[f32; FEATURES]) -> [f32; FEATURES] {
+    core::array::from_fn(|i| {
+        h.iter()
+            .enumerate()
+            .fold(0.0, |acc, (j, hj)| acc + upper(p, i, j) * hj)
+    })
+}
+
+/// P ← P − k phᵀ on the upper triangle (P(r, c) for r ≤ c, stored as p[c][r]).
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn rank1_upper(p: &mut [[f32; FEATURES]; FEATURES], k: &[f32; FEATURES], ph: &[f32; FEATURES]) {
+    for (c, (col, phc)) in p.iter_mut().zip(ph.iter()).enumerate() {
+        for (v, kr) in col.iter_mut().zip(k.iter()).take(c + 1) {
+            *v -= kr * phc;
+        }
+    }
+}
+
+/// The lower triangle of a column-major P set from its upper one.
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn mirror_upper(p: &mut [[f32; FEATURES]; FEATURES]) {
+    for c in 0..FEATURES {
+        for r in (c + 1)..FEATURES {
+            let v = upper(p, r, c);
+            if let Some(d) = p.get_mut(c).and_then(|col| col.get_mut(r)) {
+                *d = v;
+            }
+        }
     }
 }

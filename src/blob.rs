@@ -8,23 +8,32 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 18 | network shapes: J⁻¹, g, W, each `[inputs, hidden, outputs]` as u16 |
 //! | 24 | 4 | body length in bytes |
-//! | 28 | n | body: [`ModelWeights`] in postcard: the vehicle's mass (kg), then every network parameter, each an f32 |
+//! | 28 | n | body: the vehicle's mass (kg), its motor time constant (s), then every network parameter ([`ModelWeights`] in blob order), each an f32, as postcard writes them |
 //! | 28 + n | 4 | CRC-32 (IEEE 802.3) of the body |
 //!
-//! Version 1 (before the mass was data) has no mass in its body: it is read as a model of the
-//! stock CF2X ([`MASS_KG`], the only mass version 1 was ever trained with), so old blobs keep
-//! flying unchanged. [`encode`] always writes the current version.
+//! Older versions migrate on decode, so old blobs keep flying unchanged:
+//! - version 1 (before the mass was data) has neither mass nor motor lag in its body: it is read
+//!   as a model of the stock CF2X ([`MASS_KG`], the only mass version 1 was ever trained with);
+//! - versions 1 and 2 (before the motor lag was data) read with [`DEFAULT_MOTOR_TAU_S`], the lag
+//!   the composite law's prediction assumed for every model then.
+//!
+//! [`encode`] and [`encode_model`] always write the current version. [`decode`] and
+//! [`decode_into`] give the networks and the mass ([`ModelWeights`]); [`decode_model_into`] (and
+//! [`LearnedModel::from_blob`]) also the motor lag.
 //!
 //! [`decode`] (by value) and [`decode_into`] (in place, for small stacks) check each field in that
 //! order and return the first failure as a [`BlobError`]; they never panic and never leave a
 //! partly loaded model.
 
-use crate::model::{ModelWeights, MASS_KG, MAX_MASS_KG, MIN_MASS_KG};
+use crate::model::{
+    LearnedModel, ModelWeights, DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG, MAX_MOTOR_TAU_S,
+    MIN_MASS_KG,
+};
 
 /// The blob's first four bytes.
 pub const MAGIC: [u8; 4] = *b"HMFW";
 /// The format version this build reads and writes.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
 /// The oldest format version this build reads (migrated on decode; see the module docs).
 pub const OLDEST_VERSION: u16 = 1;
 /// Size of the fixed header before the body.
@@ -54,6 +63,8 @@ pub enum BlobError {
     NonFinite,
     /// The vehicle mass is not in [[`MIN_MASS_KG`], [`MAX_MASS_KG`]] kg.
     BadMass,
+    /// The motor time constant is not in [0, [`MAX_MOTOR_TAU_S`]] s.
+    BadMotorTau,
 }
 
 impl core::fmt::Display for BlobError {
@@ -77,6 +88,7 @@ impl core::fmt::Display for BlobError {
             // printing into every firmware that shows this error (blob_error_text_names_the_range
             // checks the text against MIN_MASS_KG and MAX_MASS_KG).
             Self::BadMass => f.write_str("weight blob vehicle mass is outside 0.005..=5 kg"),
+            Self::BadMotorTau => f.write_str("weight blob motor time constant is outside 0..=1 s"),
         }
     }
 }
@@ -121,17 +133,37 @@ pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
 /// the stack, so a firmware can boot on a few hundred bytes of it (decoding into a `static`).
 /// Every check runs before the first parameter is written, so on error `out` is unchanged.
 ///
-/// The body is postcard's encoding of [`ModelWeights`], which for these all-f32 tuples is the mass
-/// then each parameter as 4 little-endian bytes in [`ModelWeights::params_mut`] order; it is read as such
-/// (`tests/blob.rs` checks that postcard agrees on random and shipped blobs).
+/// The body is postcard's encoding of the tuple (mass, motor lag, J⁻¹, g, W networks), which for
+/// these all-f32 values is each as 4 little-endian bytes, the parameters in
+/// [`ModelWeights::params_mut`] order; it is read as such (`tests/blob.rs` checks that postcard
+/// agrees on random and shipped blobs). The motor lag is checked here but not stored: see
+/// [`decode_model_into`].
 ///
 /// # Errors
 /// The first failed check, in file order: [`BlobError::Truncated`] (shorter than the header),
 /// [`BlobError::BadMagic`], [`BlobError::UnsupportedVersion`], [`BlobError::ShapeMismatch`],
 /// [`BlobError::Truncated`] / [`BlobError::TrailingBytes`] (length disagrees with the header),
-/// [`BlobError::Checksum`], [`BlobError::Malformed`] (the body is not the mass and
-/// [`ModelWeights::PARAMS`] f32 values), [`BlobError::NonFinite`], [`BlobError::BadMass`].
+/// [`BlobError::Checksum`], [`BlobError::Malformed`] (the body is not the mass, the motor lag
+/// and [`ModelWeights::PARAMS`] f32 values), [`BlobError::NonFinite`], [`BlobError::BadMass`],
+/// [`BlobError::BadMotorTau`].
 pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError> {
+    decode_checked(bytes, out).map(|_| ())
+}
+
+/// [`decode_into`] for the whole model: the networks and the mass into `out.weights`, the motor
+/// lag into `out` ([`LearnedModel::with_motor_tau_s`]; [`DEFAULT_MOTOR_TAU_S`] for blobs before
+/// version 3). On error `out` is unchanged.
+///
+/// # Errors
+/// As [`decode_into`].
+pub fn decode_model_into(bytes: &[u8], out: &mut LearnedModel) -> Result<(), BlobError> {
+    let tau = decode_checked(bytes, &mut out.weights)?;
+    *out = out.with_motor_tau_s(tau);
+    Ok(())
+}
+
+/// [`decode_into`], returning the blob's motor lag (s).
+fn decode_checked(bytes: &[u8], out: &mut ModelWeights) -> Result<f32, BlobError> {
     let prefix = expected_prefix();
     let magic = bytes.get(..4).ok_or(BlobError::Truncated)?;
     if magic != MAGIC {
@@ -173,33 +205,57 @@ pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError
         return Err(BlobError::Checksum);
     }
     let (values, rest) = body.as_chunks::<4>();
-    // Version 2 puts the mass before the parameters; version 1 has none (the stock vehicle).
-    let (mass_kg, params) = match (version, values) {
-        (1, params) => (MASS_KG, params),
-        (_, [mass, params @ ..]) => (f32::from_le_bytes(*mass), params),
-        (_, []) => return Err(BlobError::Malformed),
+    // Version 3 puts the mass and the motor lag before the parameters, version 2 the mass
+    // alone; version 1 has neither (the stock vehicle).
+    let (mass_kg, motor_tau_s, params) = match (version, values) {
+        (1, params) => (MASS_KG, DEFAULT_MOTOR_TAU_S, params),
+        (2, [mass, params @ ..]) => (f32::from_le_bytes(*mass), DEFAULT_MOTOR_TAU_S, params),
+        (3.., [mass, tau, params @ ..]) => {
+            (f32::from_le_bytes(*mass), f32::from_le_bytes(*tau), params)
+        }
+        _ => return Err(BlobError::Malformed),
     };
     if params.len() != ModelWeights::PARAMS || !rest.is_empty() {
         return Err(BlobError::Malformed);
     }
-    if !mass_kg.is_finite() || !params.iter().all(|b| f32::from_le_bytes(*b).is_finite()) {
+    if !mass_kg.is_finite()
+        || !motor_tau_s.is_finite()
+        || !params.iter().all(|b| f32::from_le_bytes(*b).is_finite())
+    {
         return Err(BlobError::NonFinite);
     }
     if !(MIN_MASS_KG..=MAX_MASS_KG).contains(&mass_kg) {
         return Err(BlobError::BadMass);
     }
+    if !(0.0..=MAX_MOTOR_TAU_S).contains(&motor_tau_s) {
+        return Err(BlobError::BadMotorTau);
+    }
     out.mass_kg = mass_kg;
     for (slot, b) in out.params_mut().zip(params) {
         *slot = f32::from_le_bytes(*b);
     }
-    Ok(())
+    Ok(motor_tau_s)
 }
 
-/// Encodes weights as a blob (host side).
+/// Encodes weights as a blob (host side), with the default motor lag ([`DEFAULT_MOTOR_TAU_S`]).
 #[cfg(feature = "std")]
 pub fn encode(weights: &ModelWeights) -> Vec<u8> {
+    encode_model(&LearnedModel::new(*weights))
+}
+
+/// Encodes a model as a blob (host side): its networks, mass and motor lag.
+#[cfg(feature = "std")]
+pub fn encode_model(model: &LearnedModel) -> Vec<u8> {
+    let w = &model.weights;
     // Serializing plain f32 tuples into a Vec cannot fail.
-    let body = postcard::to_stdvec(weights).unwrap_or_default();
+    let body = postcard::to_stdvec(&(
+        w.mass_kg,
+        crate::model::HamiltonianModel::motor_tau_s(model),
+        &w.inertia,
+        &w.gain,
+        &w.disturbance,
+    ))
+    .unwrap_or_default();
     let mut out = Vec::with_capacity(HEADER_LEN + body.len() + CRC_LEN);
     out.extend_from_slice(&expected_prefix());
     out.extend_from_slice(&(body.len() as u32).to_le_bytes());

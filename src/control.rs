@@ -21,31 +21,34 @@ use crate::adapt::{
     Adaptation, AdaptationLaw, AdaptationRates, CompositeGains, Measurement, TrackingError,
 };
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
-use crate::model::{HamiltonianModel, State, FEATURES, MASS_KG};
+use crate::model::{HamiltonianModel, State, DEFAULT_MOTOR_TAU_S, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
 use crate::shaping::SetpointShaper;
 use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 
 /// Controller gains and adaptation rates.
 ///
-/// Defaults, tuned on the SITL CF2X at 500 Hz (see the issue notes for the sweep):
+/// [`Gains::for_vehicle`] (and so [`Gains::default`], the stock CF2X) derives them from the
+/// vehicle ([`VehicleFacts`]: mass, inertia, motor lag), for the sensor chain a Crazyflie gives
+/// the controller (filtered gyro, an estimator, one sample of delay; docs/crazyflie-chain.md):
 /// - k_p = 16 m, k_v = 8 m (ω_n = 4 rad/s, ζ = 1). The paper's 5 m and 2.5 m (ω_n = 2.2 rad/s,
-///   ζ = 0.56) are stable but leave the adaptation loop slow and lightly damped: on paper-spiral
-///   the geometric adaptive baseline holds 7 mm with them against 0.6 mm with these.
-/// - k_R = 0.015 N·m/rad, k_ω = 0.002 N·m·s/rad (damping pole k_ω/J ≈ 140 rad/s, well inside a
-///   500 Hz loop). The paper's k_R = 1.0 and k_ω = 0.08, read as SI torque gains on
-///   J ≈ 1.4e-5 kg·m², put that pole near 5700 rad/s, beyond what a 500 Hz–1 kHz loop can hold;
-///   crazyflie-firmware's Lee controller uses 0.007 / 0.00115 for this vehicle.
+///   ζ = 0.56) are stable but leave the adaptation loop slow and lightly damped.
+/// - k_R and k_ω from the inertia and the motor lag, with the lag compensated
+///   ([`LagCompensation`]); for the CF2X k_R = 4.3e-3 N·m/rad and k_ω = 4.2e-4 N·m·s/rad
+///   (crazyflie-firmware's Lee controller uses 0.007 / 0.00115). The paper's k_R = 1.0 and
+///   k_ω = 0.08, read as SI torque gains on J ≈ 1.4e-5 kg·m², are beyond what a 500 Hz loop can
+///   hold; the earlier 0.015 / 0.002 ([`Gains::for_mass_kg`]) were tuned on a perfect state and
+///   oscillate behind the Crazyflie's gyro filter and a 50–70 ms motor lag.
 /// - Adaptation rates act on feature units: with features scaled so that a reads as m/s² (force)
 ///   and 1e-3 N·m (torque), m c_p ≈ 22 /s² and m c_v ≈ 14 /s keep the third-order translational
 ///   error loop (s³ + 8s² + (16 + m c_v)s + m c_p) well damped.
+/// - The law's velocity is made consistent with the position
+///   ([`Gains::velocity_consistency_tau_s`]), so a biased velocity estimate does not bias the
+///   adaptation.
 /// - The adaptation law is the paper's gradient law; `law: AdaptationLaw::Composite` selects the
-///   composite law of [`crate::adapt`]. The composite law wins on every scenario of issue 13
-///   and on the paper's, but not everywhere: its prediction must assume a motor lag, and the
-///   50 ms it assumes (without which it crashes on a 72 ms lag) costs it the fast `diamond`
-///   (0.20 cm against 0.05 cm), so it is not the default (README, "Adaptation laws"). The
-///   robust clipping of [`AdaptationRates`] is off by default (it cost the gradient law on
-///   paper-spiral and changed nothing measurable with the composite law).
+///   composite law of [`crate::adapt`]. The robust clipping of [`AdaptationRates`] is off by
+///   default (it cost the gradient law on paper-spiral and changed nothing measurable with the
+///   composite law).
 ///
 /// [`Gains::paper`] gives the paper's literal values.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,20 +74,166 @@ pub struct Gains {
     /// Natural frequency ω (rad/s) of the reference model that shapes setpoint jumps
     /// ([`crate::shaping`]); 0 turns it off. Smooth trajectories pass unchanged.
     pub shaping_omega_rad_s: f32,
+    /// The motor-lag compensation in front of the mixer.
+    pub lag: LagCompensation,
+    /// Time constant τ_c (s) of the velocity-consistency correction; 0 turns it off (the law uses
+    /// the state's velocity as given, as the paper).
+    ///
+    /// The law uses v + Rᵀ c, where c is the low-passed (τ_c) difference between the rate of
+    /// the given position and the given velocity in the world frame, ṗ − R v. An estimator whose
+    /// model has no horizontal body force (the Crazyflie's EKF in flight) carries a steady
+    /// velocity bias b_v under a steady external force while its position stays put; the law's
+    /// damping k_v e_v then pushes with k_v b_v, and the paper's adaptation settles where
+    /// c_p ê_p = −c_v b_v, a position offset of (c_v / c_p) b_v. The position's rate is
+    /// unbiased at steady state, so the corrected velocity is too; on an unbiased state c ≈ 0
+    /// (differences of order dt · acceleration).
+    pub velocity_consistency_tau_s: f32,
 }
 
+/// Motor-lag compensation: a lead on the wrench that makes a first-order motor lag τ_m look
+/// like a shorter one τ_t to the law's torques.
+///
+/// The controller keeps û, the delivered wrench (after the mixer's saturation) through the motor
+/// model τ_m û̇ = u_cmd − û, and commands u_cmd = û + (τ_m / τ_t)(u − û). If the model holds, û
+/// follows the law's u with time constant τ_t: τ_t û̇ = u − û. Equivalently a lead
+/// (τ_m s + 1)/(τ_t s + 1) whose state is the delivered wrench, so a saturated command does
+/// not wind it up. Off when `motor_tau_s` ≤ `target_tau_s`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LagCompensation {
+    /// τ_m: the motors' time constant the compensation assumes (s); 0 turns it off.
+    pub motor_tau_s: f32,
+    /// τ_t: the lag the law should see instead (s).
+    pub target_tau_s: f32,
+}
+
+impl LagCompensation {
+    /// No compensation.
+    pub const OFF: Self = Self {
+        motor_tau_s: 0.0,
+        target_tau_s: 0.0,
+    };
+
+    /// The lead ratio τ_m / τ_t, or `None` when off (or not a finite ratio above 1).
+    pub fn ratio(&self) -> Option<f32> {
+        let r = self.motor_tau_s / self.target_tau_s;
+        (self.target_tau_s > 0.0 && r.is_finite() && r > 1.0).then_some(r)
+    }
+}
+
+/// The lag the compensated motors show the law (s): [`Gains::for_vehicle`] makes any slower
+/// motor look like this one.
+pub const LAG_TARGET_S: f32 = 0.006;
+
+/// The delay in front of the attitude loop besides the motors (s) that [`Gains::for_vehicle`]
+/// designs for: the gyro's 2-pole 80 Hz low-pass (≈ 2.8 ms), one sample between estimate and
+/// controller (1 ms) and half a 500 Hz tick of hold (1 ms).
+pub const SENSOR_DELAY_S: f32 = 0.005;
+
+/// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
+/// position loop (4 rad/s), fast against a changing wind; measured flat from 0.1 to 1 s.
+pub const VELOCITY_CONSISTENCY_TAU_S: f32 = 0.3;
+
+/// The symmetric-optimum spacing a of the attitude design: the PD zero at ω_c / a, the lag at
+/// a ω_c; a = 3 gives a phase margin of atan 3 − atan ⅓ ≈ 53° on the design model.
+pub const ATTITUDE_SPACING: f32 = 3.0;
+
 impl Default for Gains {
-    /// The tuned gains for the stock vehicle ([`MASS_KG`]).
+    /// The tuned gains for the stock vehicle ([`VehicleFacts::default`]).
     fn default() -> Self {
-        Self::for_mass_kg(MASS_KG)
+        Self::for_vehicle(&VehicleFacts::default())
+    }
+}
+
+/// What the gains are derived from: the facts about the vehicle that a model (its weight blob)
+/// carries. One image flies any vehicle because every gain comes from these.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VehicleFacts {
+    /// Mass m (kg).
+    pub mass_kg: f32,
+    /// Principal moments of inertia diag(J) at hover (kg·m², body).
+    pub inertia_kg_m2: Vector3<f32>,
+    /// The motors' first-order time constant (s).
+    pub motor_tau_s: f32,
+}
+
+impl Default for VehicleFacts {
+    /// The stock CF2X: [`MASS_KG`], J = diag(1.4, 1.4, 2.17)·1e-5 kg·m², [`DEFAULT_MOTOR_TAU_S`].
+    fn default() -> Self {
+        Self {
+            mass_kg: MASS_KG,
+            inertia_kg_m2: Vector3::new(1.4e-5, 1.4e-5, 2.17e-5),
+            motor_tau_s: DEFAULT_MOTOR_TAU_S,
+        }
+    }
+}
+
+impl VehicleFacts {
+    /// The facts `model` gives: its mass, the diagonal of its J at hover (level, at rest; the
+    /// stock inertia where J⁻¹ is singular or not positive) and its motor lag.
+    pub fn of<M: HamiltonianModel>(model: &M) -> Self {
+        let stock = Self::default();
+        let terms = model.terms(&State::default());
+        let inertia_kg_m2 = match terms.inertia_inv.try_inverse().map(|j| j.diagonal()) {
+            Some(d) if d.iter().all(|x| x.is_finite() && *x > 0.0) => d,
+            _ => stock.inertia_kg_m2,
+        };
+        let tau = model.motor_tau_s();
+        Self {
+            mass_kg: model.mass_kg(),
+            inertia_kg_m2,
+            motor_tau_s: if tau.is_finite() && tau >= 0.0 {
+                tau
+            } else {
+                stock.motor_tau_s
+            },
+        }
     }
 }
 
 impl Gains {
-    /// The tuned gains for a vehicle of mass `mass_kg` (kg): k_p = 16 m and k_v = 8 m, so the
-    /// translational loop keeps its natural frequency (4 rad/s) and damping (ζ = 1) whatever the
-    /// vehicle weighs. Attitude gains and adaptation rates are per unit inertia and feature and
-    /// stay as tuned for the CF2X.
+    /// The gains for the vehicle `facts` describes: the translational gains of
+    /// [`Gains::for_mass_kg`], and the attitude loop designed from the inertia and the motor lag.
+    ///
+    /// - A motor lag τ_m longer than [`LAG_TARGET_S`] is compensated down to it
+    ///   ([`LagCompensation`]); the composite law's prediction assumes the same τ_m.
+    /// - The law's velocity is made consistent with the position
+    ///   ([`VELOCITY_CONSISTENCY_TAU_S`]), against an estimator's velocity bias.
+    /// - The attitude loop per axis is J s² behind the lag τ_e = min(τ_m, τ_t) +
+    ///   [`SENSOR_DELAY_S`]. A PD law k_R + k_ω s on it, by the symmetric optimum with spacing
+    ///   a = [`ATTITUDE_SPACING`]: crossover ω_c = 1 / (a τ_e), k_ω = J ω_c, k_R = J ω_c² / a
+    ///   (|L(jω_c)| = 1 exactly on the design model), with J the smaller of J_x and J_y.
+    pub fn for_vehicle(facts: &VehicleFacts) -> Self {
+        let mut g = Self::for_mass_kg(facts.mass_kg);
+        let tau_m = if facts.motor_tau_s.is_finite() && facts.motor_tau_s > 0.0 {
+            facts.motor_tau_s
+        } else {
+            0.0
+        };
+        g.composite.motor_tau_s = tau_m;
+        g.lag = if tau_m > LAG_TARGET_S {
+            LagCompensation {
+                motor_tau_s: tau_m,
+                target_tau_s: LAG_TARGET_S,
+            }
+        } else {
+            LagCompensation::OFF
+        };
+        g.velocity_consistency_tau_s = VELOCITY_CONSISTENCY_TAU_S;
+        let tau_e = tau_m.min(LAG_TARGET_S) + SENSOR_DELAY_S;
+        let j = facts.inertia_kg_m2.x.min(facts.inertia_kg_m2.y);
+        let wc = 1.0 / (ATTITUDE_SPACING * tau_e);
+        if j.is_finite() && j > 0.0 {
+            g.k_w = j * wc;
+            g.k_r = j * wc * wc / ATTITUDE_SPACING;
+        }
+        g
+    }
+
+    /// The gains tuned on a perfect state for a vehicle of mass `mass_kg` (kg): k_p = 16 m and
+    /// k_v = 8 m, so the translational loop keeps its natural frequency (4 rad/s) and damping
+    /// (ζ = 1) whatever the vehicle weighs, with the stiff attitude gains k_R = 0.015,
+    /// k_ω = 0.002, no lag compensation and no velocity consistency. The base of
+    /// [`Gains::for_vehicle`], which is what a vehicle should fly.
     pub fn for_mass_kg(mass_kg: f32) -> Self {
         Self {
             k_p: 16.0 * mass_kg,
@@ -107,6 +256,8 @@ impl Gains {
             law: AdaptationLaw::Gradient,
             composite: CompositeGains::default(),
             shaping_omega_rad_s: 3.0,
+            lag: LagCompensation::OFF,
+            velocity_consistency_tau_s: 0.0,
         }
     }
 
@@ -135,6 +286,8 @@ impl Gains {
             law: AdaptationLaw::Gradient,
             composite: CompositeGains::default(),
             shaping_omega_rad_s: 0.0,
+            lag: LagCompensation::OFF,
+            velocity_consistency_tau_s: 0.0,
         }
     }
 }
@@ -226,6 +379,12 @@ pub struct FlightController<M> {
     tilt: TiltLimit,
     /// The reference model that shapes setpoint jumps.
     shaper: SetpointShaper,
+    /// The delivered wrench through the motor model ([`LagCompensation`]): û = [f; τ].
+    u_model: Option<Vector4<f32>>,
+    /// The last given position (m, world) and velocity (m/s, world), and the
+    /// velocity-consistency correction c (m/s, world), for [`Gains::velocity_consistency_tau_s`].
+    prev_p_m: Option<(Vector3<f32>, Vector3<f32>)>,
+    velocity_correction_m_s: Vector3<f32>,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
@@ -240,6 +399,9 @@ impl<M: HamiltonianModel> FlightController<M> {
             comp_rate_n_s: Vector3::zeros(),
             tilt: TiltLimit::new(gains.max_tilt_rad),
             shaper: SetpointShaper::default(),
+            u_model: None,
+            prev_p_m: None,
+            velocity_correction_m_s: Vector3::zeros(),
         }
     }
 
@@ -259,10 +421,14 @@ impl<M: HamiltonianModel> FlightController<M> {
         self.shaper.reset();
         self.comp_prev_n = None;
         self.comp_rate_n_s = Vector3::zeros();
+        self.u_model = None;
+        self.prev_p_m = None;
     }
 
     fn safe(&mut self, faults: Faults) -> Output {
         self.comp_prev_n = None;
+        self.u_model = None;
+        self.prev_p_m = None;
         self.shaper.reset();
         // The next good tick does not follow this one by one interval, and nothing was delivered.
         self.adaptation.break_sequence();
@@ -313,12 +479,13 @@ impl<M: HamiltonianModel> FlightController<M> {
         if self.tilt.max_rad != self.gains.max_tilt_rad {
             self.tilt = TiltLimit::new(self.gains.max_tilt_rad);
         }
+        let v_law = self.consistent_velocity(state, dt_s);
         let g = &self.gains;
         let t = self.model.terms(state);
         let m = t.mass_kg;
         let r = &state.rot;
         let rt = r.transpose();
-        let v = &state.v_body_m_s;
+        let v = &v_law;
         let w = &state.w_body_rad_s;
         let Some(inertia) = t.inertia_inv.try_inverse() else {
             faults.numeric = true;
@@ -389,7 +556,36 @@ impl<M: HamiltonianModel> FlightController<M> {
             thrust_n: u.x,
             torque_nm: Vector3::new(u.y, u.z, u.w),
         };
-        let (rotors, sat) = self.airframe.mix(&wrench);
+        // Motor-lag compensation: lead the command from the delivered wrench's model.
+        let lead = g.lag.ratio();
+        let commanded = match (lead, self.u_model) {
+            // The torques only: the attitude loop is the one the lag limits, and a lead on the
+            // collective thrust would spend a heavy vehicle's small thrust margin.
+            (Some(ratio), Some(model)) => {
+                let c = model + (u - model) * ratio;
+                Wrench {
+                    thrust_n: u.x,
+                    torque_nm: Vector3::new(c.y, c.z, c.w),
+                }
+            }
+            _ => wrench,
+        };
+        let (rotors, sat) = self.airframe.mix(&commanded);
+        let delivered = self.airframe.wrench(&rotors.thrust_n);
+        if lead.is_some() {
+            let d = Vector4::new(
+                delivered.thrust_n,
+                delivered.torque_nm.x,
+                delivered.torque_nm.y,
+                delivered.torque_nm.z,
+            );
+            let beta = dt_s / (g.lag.motor_tau_s + dt_s);
+            let next = match self.u_model {
+                Some(m) => m + (d - m) * beta,
+                None => d,
+            };
+            self.u_model = next.iter().all(|x| x.is_finite()).then_some(next);
+        }
         faults.saturation = sat;
         let errors = TrackingError { e_p, e_v, e_r, e_w };
         if !(u.iter().all(|x| x.is_finite()) && errors_finite(&errors)) {
@@ -411,7 +607,7 @@ impl<M: HamiltonianModel> FlightController<M> {
                     gravity_m_s2: t.gravity_m_s2,
                     inertia: &inertia,
                     rot: r,
-                    v_body_m_s: v,
+                    v_body_m_s: &state.v_body_m_s,
                     w_body_rad_s: w,
                     measurement: meas,
                 };
@@ -423,8 +619,7 @@ impl<M: HamiltonianModel> FlightController<M> {
                     .step(&g.rates, &t.features, &errors, m, dt_s);
             }
             #[cfg(feature = "composite")]
-            self.adaptation
-                .record_input(&self.airframe.wrench(&rotors.thrust_n));
+            self.adaptation.record_input(&delivered);
         }
         Output {
             rotors,
@@ -433,6 +628,32 @@ impl<M: HamiltonianModel> FlightController<M> {
             errors,
             faults,
         }
+    }
+}
+
+impl<M> FlightController<M> {
+    /// The body velocity the law uses: the state's, plus Rᵀ c with the velocity-consistency
+    /// correction c ([`Gains::velocity_consistency_tau_s`]) updated from this tick's position.
+    fn consistent_velocity(&mut self, state: &State, dt_s: f32) -> Vector3<f32> {
+        let tau = self.gains.velocity_consistency_tau_s;
+        if tau.is_nan() || tau <= 0.0 {
+            self.prev_p_m = None;
+            return state.v_body_m_s;
+        }
+        let v_world = state.rot * state.v_body_m_s;
+        if let Some((prev_p, prev_v)) = self.prev_p_m {
+            // The mean velocity over the tick against the mean of its ends: second order in dt.
+            let diff = (state.p_m - prev_p) / dt_s - (v_world + prev_v) * 0.5;
+            let alpha = dt_s / (tau + dt_s);
+            let next = self.velocity_correction_m_s + (diff - self.velocity_correction_m_s) * alpha;
+            if next.iter().all(|x| x.is_finite()) {
+                self.velocity_correction_m_s = next;
+            }
+        } else {
+            self.velocity_correction_m_s = Vector3::zeros();
+        }
+        self.prev_p_m = Some((state.p_m, v_world));
+        state.v_body_m_s + state.rot.transpose() * self.velocity_correction_m_s
     }
 }
 

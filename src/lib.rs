@@ -33,7 +33,9 @@ pub mod reference;
 pub mod shaping;
 
 pub use adapt::{AdaptationLaw, Measurement};
-pub use control::{is_rotation, Faults, FlightController, Gains, Output, ROTATION_TOLERANCE};
+pub use control::{
+    is_rotation, Faults, FlightController, Gains, Output, VehicleFacts, ROTATION_TOLERANCE,
+};
 pub use mixer::{RotorCommand, Wrench};
 pub use model::State;
 pub use reference::Setpoint;

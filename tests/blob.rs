@@ -9,8 +9,13 @@
 mod common;
 
 use common::SplitMix64;
-use hamflight::blob::{decode, decode_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC};
-use hamflight::model::{GainNet, InertiaNet, ModelWeights, MASS_KG, MAX_MASS_KG, MIN_MASS_KG};
+use hamflight::blob::{
+    decode, decode_into, decode_model_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC,
+};
+use hamflight::model::{
+    DisturbanceNet, GainNet, HamiltonianModel, InertiaNet, LearnedModel, ModelWeights,
+    DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG, MAX_MOTOR_TAU_S, MIN_MASS_KG,
+};
 use hamflight::nn::{Dense, Mlp};
 use proptest::prelude::*;
 
@@ -44,9 +49,22 @@ fn params(w: &ModelWeights) -> Vec<f32> {
     out
 }
 
-/// The body's values in blob order (format version 2): the mass, then every parameter.
+/// What [`decode`] gives, in blob order: the mass, then every parameter.
 fn body_values(w: &ModelWeights) -> Vec<f32> {
     [w.mass_kg].into_iter().chain(params(w)).collect()
+}
+
+/// The body's values in blob order (format version 3): the mass, the motor time constant
+/// `tau`, then every parameter.
+fn body_values_tau(w: &ModelWeights, tau: f32) -> Vec<f32> {
+    [w.mass_kg, tau].into_iter().chain(params(w)).collect()
+}
+
+/// A random valid motor lag (s).
+#[cfg_attr(not(feature = "std"), allow(dead_code))]
+fn random_tau(seed: u64) -> f32 {
+    let unit = (SplitMix64(seed ^ 0x7A0).next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+    unit * MAX_MOTOR_TAU_S
 }
 
 /// Weights with every parameter a random finite f32 bit pattern (including ±0, subnormals and
@@ -84,7 +102,7 @@ fn crc32_reference(data: &[u8]) -> u32 {
 
 /// A current-version blob from a raw body, following the documented layout.
 fn blob_from_body(body: &[u8]) -> Vec<u8> {
-    blob_from_body_version(2, body)
+    blob_from_body_version(3, body)
 }
 
 /// A blob of format `version` from a raw body, following the documented layout.
@@ -103,9 +121,14 @@ fn blob_from_body_version(version: u16, body: &[u8]) -> Vec<u8> {
     out
 }
 
-/// The documented encoding of `w`.
+/// The documented encoding of `w` with the default motor lag.
 fn encode_reference(w: &ModelWeights) -> Vec<u8> {
-    let body: Vec<u8> = body_values(w)
+    encode_reference_tau(w, DEFAULT_MOTOR_TAU_S)
+}
+
+/// The documented encoding of `w` with the motor lag `tau` (s).
+fn encode_reference_tau(w: &ModelWeights, tau: f32) -> Vec<u8> {
+    let body: Vec<u8> = body_values_tau(w, tau)
         .iter()
         .flat_map(|v| v.to_le_bytes())
         .collect();
@@ -129,8 +152,9 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
             let mut v = FORMAT_VERSION.to_le_bytes();
             v[pos - 4] ^= mask;
             match u16::from_le_bytes(v) {
-                // Version 1 would read the mass as a parameter: one value too many.
-                1 => BlobError::Malformed,
+                // Versions 1 and 2 would read the mass or the motor lag as parameters: values
+                // too many.
+                1 | 2 => BlobError::Malformed,
                 v => BlobError::UnsupportedVersion(v),
             }
         }
@@ -151,15 +175,33 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
 #[test]
 fn layout_constants_match_the_documentation() {
     assert_eq!(MAGIC, *b"HMFW");
-    assert_eq!(FORMAT_VERSION, 2);
+    assert_eq!(FORMAT_VERSION, 3);
     assert_eq!(HEADER_LEN, 28);
     assert_eq!(CRC_LEN, 4);
     let blob = encode_reference(&ModelWeights::default());
     assert_eq!(
         blob.len(),
-        HEADER_LEN + 4 + 4 * params(&ModelWeights::default()).len() + CRC_LEN
+        HEADER_LEN + 4 + 4 + 4 * params(&ModelWeights::default()).len() + CRC_LEN
     );
     assert_eq!(ModelWeights::default().mass_kg, MASS_KG);
+    // The decode target stays all-zero bits, the model around it too (a `static` of it lives in
+    // .bss, not in flash), and reads as the default motor lag.
+    let zero = LearnedModel::new(ModelWeights::ZERO);
+    // SAFETY: LearnedModel is plain f32 and u32 fields (no padding, no pointers); its bytes are
+    // read, not written.
+    let bytes = unsafe {
+        std::slice::from_raw_parts(
+            (&zero as *const LearnedModel).cast::<u8>(),
+            std::mem::size_of::<LearnedModel>(),
+        )
+    };
+    assert!(bytes.iter().all(|b| *b == 0));
+    assert_eq!(zero.motor_tau_s(), DEFAULT_MOTOR_TAU_S);
+    // The motor lag is the body's second value.
+    let blob = encode_reference_tau(&ModelWeights::default(), 0.02);
+    assert_eq!(blob[HEADER_LEN + 4..HEADER_LEN + 8], 0.02f32.to_le_bytes());
+    let m = LearnedModel::from_blob(&blob).expect("valid blob");
+    assert_eq!(m.motor_tau_s().to_bits(), 0.02f32.to_bits());
     assert_eq!(crc32_reference(b"123456789"), 0xCBF4_3926);
     assert_eq!(
         hamflight::blob::crc32(b"123456789"),
@@ -182,6 +224,11 @@ fn encoder_writes_the_documented_layout() {
         let blob = hamflight::blob::encode(&w);
         assert_eq!(blob, encode_reference(&w), "seed {seed}");
         assert_bitwise_eq(&decode(&blob).expect("valid blob"), &w);
+        let tau = random_tau(seed);
+        let model = LearnedModel::new(w).with_motor_tau_s(tau);
+        let blob = hamflight::blob::encode_model(&model);
+        assert_eq!(blob, encode_reference_tau(&w, tau), "seed {seed}");
+        assert_eq!(LearnedModel::from_blob(&blob), Ok(model), "seed {seed}");
     }
 }
 
@@ -300,7 +347,30 @@ fn mass_outside_the_documented_range_is_rejected() {
     }
 }
 
-/// A version-1 blob (no mass in its body) still loads, as the stock vehicle it was trained for.
+#[test]
+fn motor_lag_outside_the_documented_range_is_rejected() {
+    let w = random_weights(31);
+    for bad in [-1e-6, -0.02, MAX_MOTOR_TAU_S * 1.01, 1e30] {
+        assert_eq!(
+            decode(&encode_reference_tau(&w, bad)).err(),
+            Some(BlobError::BadMotorTau),
+            "{bad} s"
+        );
+    }
+    for bad in [f32::NAN, f32::NEG_INFINITY] {
+        assert_eq!(
+            decode(&encode_reference_tau(&w, bad)).err(),
+            Some(BlobError::NonFinite)
+        );
+    }
+    for ok in [0.0, 0.02, 0.072, MAX_MOTOR_TAU_S] {
+        let m = LearnedModel::from_blob(&encode_reference_tau(&w, ok));
+        assert_eq!(m.map(|m| m.motor_tau_s()), Ok(ok));
+    }
+}
+
+/// A version-1 blob (no mass in its body) still loads, as the stock vehicle it was trained for,
+/// with the motor lag every model assumed then.
 #[test]
 fn version_1_blob_is_migrated_to_the_stock_mass() {
     let w = ModelWeights {
@@ -309,13 +379,43 @@ fn version_1_blob_is_migrated_to_the_stock_mass() {
     };
     let body: Vec<u8> = params(&w).iter().flat_map(|v| v.to_le_bytes()).collect();
     let v1 = blob_from_body_version(1, &body);
-    let got = decode(&v1).expect("version 1 decodes");
-    assert_eq!(got.mass_kg, MASS_KG);
-    assert_eq!(params(&got), params(&w));
-    // A version-1 header over a version-2 body has one value too many.
-    let v2_body = &encode_reference(&w)[HEADER_LEN..][..body.len() + 4];
+    let got = LearnedModel::from_blob(&v1).expect("version 1 decodes");
+    assert_eq!(got.weights.mass_kg, MASS_KG);
+    assert_eq!(got.motor_tau_s(), DEFAULT_MOTOR_TAU_S);
+    assert_eq!(params(&got.weights), params(&w));
+    // A version-1 header over a version-3 body has two values too many.
+    let v3_body = &encode_reference_tau(&w, 0.02)[HEADER_LEN..][..body.len() + 8];
     assert_eq!(
-        decode(&blob_from_body_version(1, v2_body)).err(),
+        decode(&blob_from_body_version(1, v3_body)).err(),
+        Some(BlobError::Malformed)
+    );
+}
+
+/// A version-2 blob (the mass, no motor lag) loads with its mass and the default lag, the one
+/// the composite law assumed for every model before the lag was data.
+#[test]
+fn version_2_blob_is_migrated_to_the_default_motor_lag() {
+    let w = ModelWeights {
+        mass_kg: 0.034,
+        ..random_weights(37)
+    };
+    let body: Vec<u8> = body_values(&w)
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let got = LearnedModel::from_blob(&blob_from_body_version(2, &body)).expect("version 2");
+    assert_eq!(got.weights.mass_kg, 0.034);
+    assert_eq!(got.motor_tau_s(), DEFAULT_MOTOR_TAU_S);
+    assert_eq!(params(&got.weights), params(&w));
+    // A version-2 header over a version-3 body has one value too many, and a version-3 header
+    // over a version-2 body one too few.
+    let v3_body = &encode_reference_tau(&w, 0.02)[HEADER_LEN..][..body.len() + 4];
+    assert_eq!(
+        decode(&blob_from_body_version(2, v3_body)).err(),
+        Some(BlobError::Malformed)
+    );
+    assert_eq!(
+        decode(&blob_from_body_version(3, &body)).err(),
         Some(BlobError::Malformed)
     );
 }
@@ -350,8 +450,8 @@ fn header_checks_come_in_file_order() {
     assert_eq!(decode(b"XXXX").err(), Some(BlobError::BadMagic));
     assert_eq!(decode(b"HMFW").err(), Some(BlobError::Truncated));
     assert_eq!(
-        decode(b"HMFW\x03\x00").err(),
-        Some(BlobError::UnsupportedVersion(3))
+        decode(b"HMFW\x04\x00").err(),
+        Some(BlobError::UnsupportedVersion(4))
     );
     assert_eq!(
         decode(b"HMFW\x00\x00").err(),
@@ -383,6 +483,8 @@ fn every_error_has_display_text() {
         BlobError::TrailingBytes,
         BlobError::Malformed,
         BlobError::NonFinite,
+        BlobError::BadMass,
+        BlobError::BadMotorTau,
     ];
     let texts: Vec<String> = all.iter().map(|e| e.to_string()).collect();
     for (e, t) in all.iter().zip(&texts) {
@@ -410,7 +512,7 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
         return Err(BlobError::Truncated);
     }
     let version = u16::from_le_bytes([b[4], b[5]]);
-    if version != 1 && version != 2 {
+    if !(1..=3).contains(&version) {
         return Err(BlobError::UnsupportedVersion(version));
     }
     if b.len() < 24 {
@@ -445,24 +547,37 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
     if crc32_reference(body) != crc {
         return Err(BlobError::Checksum);
     }
-    // Version 2: the mass, then the parameters; version 1: the parameters (the stock mass).
-    let n = params(&ModelWeights::default()).len() + usize::from(version == 2);
+    // Version 3: the mass, the motor lag, then the parameters; version 2: the mass, then the
+    // parameters (the default lag); version 1: the parameters (the stock mass, the default lag).
+    let n = params(&ModelWeights::default()).len() + usize::from(version) - 1;
     if body.len() != 4 * n {
         return Err(BlobError::Malformed);
     }
-    let stored = body
+    let mut stored = body
         .chunks(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
-    let values: Vec<f32> = if version == 1 {
-        std::iter::once(MASS_KG).chain(stored).collect()
-    } else {
-        stored.collect()
+    let values: Vec<f32> = match version {
+        1 => [MASS_KG, DEFAULT_MOTOR_TAU_S]
+            .into_iter()
+            .chain(stored)
+            .collect(),
+        2 => {
+            let mass = stored.next().unwrap_or(f32::NAN);
+            [mass, DEFAULT_MOTOR_TAU_S]
+                .into_iter()
+                .chain(stored)
+                .collect()
+        }
+        _ => stored.collect(),
     };
     if values.iter().any(|v| !v.is_finite()) {
         return Err(BlobError::NonFinite);
     }
     if !(MIN_MASS_KG..=MAX_MASS_KG).contains(&values[0]) {
         return Err(BlobError::BadMass);
+    }
+    if !(0.0..=MAX_MOTOR_TAU_S).contains(&values[1]) {
+        return Err(BlobError::BadMotorTau);
     }
     Ok(values)
 }
@@ -566,18 +681,36 @@ fn randomized_mutants_get_the_documented_result() {
             b
         };
         let want = decode_reference(&bytes);
+        // What `decode` gives: the values without the motor lag (the body's second).
+        let want_weights = want.clone().map(|v| {
+            v.iter()
+                .enumerate()
+                .filter(|(k, _)| *k != 1)
+                .map(|(_, x)| x.to_bits())
+                .collect::<Vec<u32>>()
+        });
         let mut out = sentinel;
         let got = decode_into(&bytes, &mut out);
+        let mut model = LearnedModel::new(sentinel).with_motor_tau_s(0.123);
+        let got_model = decode_model_into(&bytes, &mut model);
+        assert_eq!(got_model, got, "case {case}");
         match &want {
             Ok(values) => {
                 assert_eq!(got, Ok(()), "case {case}");
                 let bits: Vec<u32> = body_values(&out).iter().map(|v| v.to_bits()).collect();
-                let want_bits: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
-                assert_eq!(bits, want_bits, "case {case}");
+                assert_eq!(Ok(bits), want_weights, "case {case}");
+                assert_eq!(model.weights, out, "case {case}");
+                assert_eq!(
+                    model.motor_tau_s().to_bits(),
+                    values[1].to_bits(),
+                    "case {case}"
+                );
             }
             Err(e) => {
                 assert_eq!(got, Err(*e), "case {case}: {} bytes", bytes.len());
                 assert_bitwise_eq(&out, &sentinel);
+                assert_bitwise_eq(&model.weights, &sentinel);
+                assert_eq!(model.motor_tau_s(), 0.123);
             }
         }
         assert_eq!(
@@ -585,7 +718,7 @@ fn randomized_mutants_get_the_documented_result() {
                 .iter()
                 .map(|v| v.to_bits())
                 .collect::<Vec<_>>()),
-            want.map(|v| v.iter().map(|x| x.to_bits()).collect()),
+            want_weights,
             "case {case}"
         );
         let key = match got {
@@ -624,10 +757,23 @@ fn decode_into_agrees_with_postcard() {
     blobs.extend(shipped.ok());
     for blob in &blobs {
         let body = &blob[HEADER_LEN..blob.len() - CRC_LEN];
-        let by_postcard: ModelWeights = postcard::from_bytes(body).expect("postcard body");
-        let mut in_place = ModelWeights::ZERO;
-        decode_into(blob, &mut in_place).expect("valid blob");
-        assert_bitwise_eq(&in_place, &by_postcard);
+        let (mass_kg, tau, inertia, gain, disturbance): (
+            f32,
+            f32,
+            InertiaNet,
+            GainNet,
+            DisturbanceNet,
+        ) = postcard::from_bytes(body).expect("postcard body");
+        let by_postcard = ModelWeights {
+            mass_kg,
+            inertia,
+            gain,
+            disturbance,
+        };
+        let mut in_place = LearnedModel::new(ModelWeights::ZERO);
+        decode_model_into(blob, &mut in_place).expect("valid blob");
+        assert_bitwise_eq(&in_place.weights, &by_postcard);
+        assert_eq!(in_place.motor_tau_s().to_bits(), tau.to_bits());
     }
 }
 
@@ -658,4 +804,6 @@ fn blob_error_text_names_the_range() {
         text.contains(&format!("{MIN_MASS_KG}..={MAX_MASS_KG} kg")),
         "{text}"
     );
+    let text = BlobError::BadMotorTau.to_string();
+    assert!(text.contains(&format!("0..={MAX_MOTOR_TAU_S} s")), "{text}");
 }

@@ -119,7 +119,22 @@ fn non_finite_inputs_give_motors_off_and_a_fault() {
 fn default_gains_are_pinned() {
     let g = Gains::default();
     assert_eq!((g.k_p, g.k_v), (16.0 * 0.027, 8.0 * 0.027));
-    assert_eq!((g.k_r, g.k_w), (0.015, 0.002));
+    // The attitude loop of `Gains::for_vehicle` for the CF2X (J_x = 1.4e-5 kg·m², 50 ms motor
+    // lag compensated to 6 ms, 5 ms of sensor delay): ω_c = 1 / (3 · 11 ms).
+    let wc = 1.0 / (3.0 * 0.011f32);
+    assert!((g.k_w - 1.4e-5 * wc).abs() < 1e-8, "k_w {}", g.k_w);
+    assert!(
+        (g.k_r - 1.4e-5 * wc * wc / 3.0).abs() < 1e-7,
+        "k_r {}",
+        g.k_r
+    );
+    assert_eq!(
+        (g.lag.motor_tau_s, g.lag.target_tau_s),
+        (0.05, hamflight::control::LAG_TARGET_S)
+    );
+    assert_eq!(g.velocity_consistency_tau_s, 0.3);
+    let stiff = Gains::for_mass_kg(0.027);
+    assert_eq!((stiff.k_r, stiff.k_w), (0.015, 0.002));
     assert_eq!(
         (g.rates.c_p, g.rates.c_v, g.rates.c_r, g.rates.c_w),
         (800.0, 500.0, 20_000.0, 2_000.0)
@@ -244,6 +259,6 @@ fn the_models_mass_sets_hover_thrust_and_gains() {
     }
     assert_eq!(
         Gains::default(),
-        Gains::for_mass_kg(hamflight::model::MASS_KG)
+        Gains::for_vehicle(&hamflight::VehicleFacts::default())
     );
 }

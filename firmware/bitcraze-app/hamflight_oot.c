@@ -11,8 +11,9 @@
  *     (degrees, legacy inverted pitch) is not used.
  *   - body rates: sensors->gyro (deg/s, body) -> rad/s.
  *   - velocity: state->velocity is world frame; the core wants body frame: v = R^T v_world.
- *   - accelerometer: sensors->acc (Gs, body) -> specific force in m/s^2 (carried for the
- *     composite adaptation law; the current core step does not use it).
+ *   - accelerometer: sensors->acc (Gs, body) -> specific force in m/s^2, always marked valid:
+ *     the composite adaptation law's force rows use it (hamflight.law = 1); the paper's
+ *     gradient law does not read it.
  *   - setpoint, per axis x, y, z (setpoint->mode.x/y/z):
  *       modeAbs      p* = position, with velocity, acceleration and jerk as feedforward;
  *       modeVelocity the velocity is integrated into p* (the cfclient joystick, cflib velocity
@@ -52,10 +53,15 @@
  * step has finished, the stabilizer does not touch the controller.
  *
  * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
- * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m).
+ * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m),
+ * law (0 the paper's gradient law, 1 the composite law; a write takes effect only while not
+ * airborne, and resets a), qF qT rF rT (the composite law's Q and R: force and torque columns
+ * and rows, in a's units; refused values revert).
  * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
  * 2 thrust, 3 tilt limit), phase (0 off, 1 ground, 2 airborne), thrust (N), tx ty tz (N*m),
- * cycles (DWT cycles of the last hf_step).
+ * cycles (DWT cycles of the last hf_step), law (the law in use), e0..e5 (the composite law's
+ * prediction error: force rows m/s^2, torque rows 1e-3 N*m; 0 under the gradient law), pTrace
+ * (the trace of its gain P).
  */
 #include <math.h>
 #include <stdbool.h>
@@ -85,6 +91,12 @@
 #endif
 #if HAMFLIGHT_RATE_HZ != RATE_500_HZ && HAMFLIGHT_RATE_HZ != RATE_1000_HZ
 #error "HAMFLIGHT_RATE_HZ must be RATE_500_HZ or RATE_1000_HZ"
+#endif
+
+/* The adaptation law at boot (the hamflight.law parameter's default): HF_LAW_GRADIENT or
+ * HF_LAW_COMPOSITE. */
+#ifndef HAMFLIGHT_DEFAULT_LAW
+#define HAMFLIGHT_DEFAULT_LAW HF_LAW_GRADIENT
 #endif
 
 #define HF_DT_S (1.0f / (float)HAMFLIGHT_RATE_HZ)
@@ -123,12 +135,17 @@ static uint8_t adaptOn = 1;
 static uint8_t resetRequest;
 static float airborneHeightM = 0.05f;
 static float leashM = HF_DEFAULT_LEASH_M;
+static uint8_t lawParam = (uint8_t)HAMFLIGHT_DEFAULT_LAW;
+static hf_composite_t composite;
 
 /* Logs. */
 static float logA[HF_FEATURES];
 static uint32_t logFaults;
 static uint8_t logSat;
 static uint32_t logCycles;
+static uint8_t logLaw;
+static float logEps[6];
+static float logPTrace;
 
 /* One step of the core on the inputs in hfState/hfSetpoint: the only deep call. */
 static void serveStep(void) {
@@ -290,10 +307,18 @@ static void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoi
   }
 }
 
-/* Apply parameter writes: gains (refused ones are reverted to what the core holds), reset. */
+/* Apply parameter writes: gains and the composite law's Q and R (refused ones are reverted to
+ * what the core holds), the law (only while not airborne: a switch resets a), reset. */
 static void applyParams(void) {
   if (hf_set_gains(&ctl, &gains) != HF_OK) {
     hf_get_gains(&ctl, &gains);
+  }
+  if (hf_set_composite(&ctl, &composite) != HF_OK) {
+    hf_get_composite(&ctl, &composite);
+  }
+  if (phase != HF_PHASE_AIRBORNE && lawParam != hf_get_law(&ctl) &&
+      hf_set_law(&ctl, lawParam) != HF_OK) {
+    lawParam = (uint8_t)hf_get_law(&ctl);
   }
   if (resetRequest) {
     hf_reset(&ctl);
@@ -325,6 +350,9 @@ static void updatePhase(const hf_state_t *s) {
 
 static void updateLogs(void) {
   hf_get_estimate(&ctl, logA);
+  (void)hf_get_prediction_error(&ctl, logEps);
+  logPTrace = hf_p_trace(&ctl);
+  logLaw = (uint8_t)hf_get_law(&ctl);
   logFaults = hfOut.faults;
   logSat = (uint8_t)(((hfOut.faults & HF_COND_SAT_YAW) ? 1u : 0u) |
                      ((hfOut.faults & HF_COND_SAT_ROLL_PITCH) ? 2u : 0u) |
@@ -335,7 +363,11 @@ static void updateLogs(void) {
 void controllerOutOfTreeInit(void) {
   if (!isInit) {
     hf_init(&ctl);
+    if (hf_set_law(&ctl, lawParam) != HF_OK) {
+      lawParam = (uint8_t)hf_get_law(&ctl);
+    }
     hf_get_gains(&ctl, &gains);
+    hf_get_composite(&ctl, &composite);
     enableCycleCounter();
     isInit = true;
   }
@@ -436,6 +468,11 @@ PARAM_ADD(PARAM_UINT8, adapt, &adaptOn)
 PARAM_ADD(PARAM_UINT8, reset, &resetRequest)
 PARAM_ADD(PARAM_FLOAT, airHeight, &airborneHeightM)
 PARAM_ADD(PARAM_FLOAT, leash, &leashM)
+PARAM_ADD(PARAM_UINT8, law, &lawParam)
+PARAM_ADD(PARAM_FLOAT, qF, &composite.q_force)
+PARAM_ADD(PARAM_FLOAT, qT, &composite.q_torque)
+PARAM_ADD(PARAM_FLOAT, rF, &composite.r_force)
+PARAM_ADD(PARAM_FLOAT, rT, &composite.r_torque)
 PARAM_GROUP_STOP(hamflight)
 
 LOG_GROUP_START(hamflight)
@@ -453,4 +490,12 @@ LOG_ADD(LOG_FLOAT, tx, &hfOut.torque_nm[0])
 LOG_ADD(LOG_FLOAT, ty, &hfOut.torque_nm[1])
 LOG_ADD(LOG_FLOAT, tz, &hfOut.torque_nm[2])
 LOG_ADD(LOG_UINT32, cycles, &logCycles)
+LOG_ADD(LOG_UINT8, law, &logLaw)
+LOG_ADD(LOG_FLOAT, e0, &logEps[0])
+LOG_ADD(LOG_FLOAT, e1, &logEps[1])
+LOG_ADD(LOG_FLOAT, e2, &logEps[2])
+LOG_ADD(LOG_FLOAT, e3, &logEps[3])
+LOG_ADD(LOG_FLOAT, e4, &logEps[4])
+LOG_ADD(LOG_FLOAT, e5, &logEps[5])
+LOG_ADD(LOG_FLOAT, pTrace, &logPTrace)
 LOG_GROUP_STOP(hamflight)

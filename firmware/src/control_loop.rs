@@ -18,7 +18,7 @@ use crate::motor::{rpm_to_pwm, Motors};
 use embedded_hal::pwm::SetDutyCycle;
 use hamflight::blob::BlobError;
 use hamflight::model::{HamiltonianModel, LearnedModel};
-use hamflight::{FlightController, Gains, Setpoint, State};
+use hamflight::{FlightController, Gains, Setpoint, State, VehicleFacts};
 
 /// Control-loop rate (Hz): 500, or 1000 with the `loop-1khz` feature.
 pub const LOOP_HZ: u32 = if cfg!(feature = "loop-1khz") {
@@ -188,19 +188,19 @@ pub struct ControlLoop<M> {
     total_cost: u64,
 }
 
-/// The core's gains for a vehicle of `mass_kg` (the blob's, [`Gains::for_mass_kg`]); with the
-/// `composite` feature, the composite adaptation law.
-pub fn default_gains(mass_kg: f32) -> Gains {
+/// The core's gains for the vehicle the blob describes ([`Gains::for_vehicle`]: mass, inertia,
+/// motor lag); with the `composite` feature, the composite adaptation law.
+pub fn default_gains(facts: &VehicleFacts) -> Gains {
     #[cfg(feature = "composite")]
     {
         Gains {
             law: hamflight::AdaptationLaw::Composite,
-            ..Gains::for_mass_kg(mass_kg)
+            ..Gains::for_vehicle(facts)
         }
     }
     #[cfg(not(feature = "composite"))]
     {
-        Gains::for_mass_kg(mass_kg)
+        Gains::for_vehicle(facts)
     }
 }
 
@@ -215,7 +215,7 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         };
         Self {
             controller: model.map(|m| {
-                let gains = default_gains(m.mass_kg());
+                let gains = default_gains(&VehicleFacts::of(&m));
                 FlightController::new(m, gains)
             }),
             latest: None,

@@ -204,7 +204,7 @@ fn track_both<M: HamiltonianModel + Clone>(
     for law in [AdaptationLaw::Gradient, AdaptationLaw::Composite] {
         let gains = hamflight::Gains {
             law,
-            ..hamflight::Gains::for_mass_kg(model.mass_kg())
+            ..hamflight::Gains::for_vehicle(&hamflight::VehicleFacts::of(&model))
         };
         let mut ctrl = CoreController::new(&args.controller, model.clone(), gains);
         let trace = track_disturbance(sc, &mut ctrl);

@@ -76,6 +76,16 @@ pub fn fly_with_progress(
     };
     let ticks_per_s = (1.0 / dt).round().max(1.0) as u64;
     let mut last_cmd = [0.0; 4];
+    let max_rpm = plant.params.max_rpm();
+    // The Crazyflie's sensor chain and estimator, sampled at every physics step.
+    let mut chain = scenario
+        .spec
+        .sensors
+        .as_ref()
+        .map(|s| crate::sensors::SensorChain::new(s, plant.state(), 1.0 / dt_phys));
+    if let Some(c) = chain.as_mut() {
+        c.sample(&plant);
+    }
     for k in 0..=n_ticks {
         let t = k as f64 * dt;
         plant.set_t_s(t);
@@ -89,6 +99,7 @@ pub fn fly_with_progress(
             .push(if err.is_finite() { err } else { f64::INFINITY });
         log.adaptation
             .push(ctrl.adaptation_estimate().unwrap_or_default());
+        log.rpy_rad.push(truth.rpy().into());
         let err_ok = err.is_finite() && err <= CRASH_ERR_M;
         if !truth.is_finite() || !err_ok || truth.p_m.z < 0.0 {
             log.rpm.push(last_cmd);
@@ -99,16 +110,31 @@ pub fn fly_with_progress(
             log.rpm.push(last_cmd);
             break;
         }
-        let meas = plant.measure(&mut rng);
-        let acc = plant.measure_accelerometer(&mut rng_acc);
+        let (meas, acc) = match chain.as_ref().and_then(|c| c.view()) {
+            Some(view) => {
+                log.est_p_m.push(view.state.p_m.into());
+                (view.state, view.acc_body_m_s2)
+            }
+            None => (
+                plant.measure(&mut rng),
+                plant.measure_accelerometer(&mut rng_acc),
+            ),
+        };
         let c0 = Instant::now();
         let cmd = ctrl.step_measured(t, &meas, Some(&acc), &r, dt);
         log.control_wall_s += c0.elapsed().as_secs_f64();
         log.control_steps += 1;
+        log.saturated.push(
+            cmd.iter()
+                .any(|&c| !(c > 0.0 && c < max_rpm * (1.0 - 1e-9))),
+        );
         last_cmd = plant.params.clamp_rpm(cmd);
         log.rpm.push(last_cmd);
         for _ in 0..nsub {
             plant.step(last_cmd, dt_phys);
+            if let Some(c) = chain.as_mut() {
+                c.sample(&plant);
+            }
         }
         if let Some(pb) = progress {
             if k % ticks_per_s == 0 {
@@ -160,6 +186,20 @@ pub struct Report {
     /// Scores around the disturbance's events ([`crate::events`]); empty without events.
     #[serde(default)]
     pub events: Vec<crate::events::EventMetrics>,
+    /// Fraction of ticks whose rotor command sat at a limit.
+    #[serde(default)]
+    pub saturated_fraction: f64,
+    /// Standard deviation of the true roll and of the true pitch over t ≥ `window_start_s`, the
+    /// larger of the two (deg): the attitude loop's oscillation in hover.
+    #[serde(default)]
+    pub att_std_deg: Option<f64>,
+    /// Mean of the estimate's position error (estimate − truth) over the window (m, world);
+    /// null without a sensor chain.
+    #[serde(default)]
+    pub est_pos_bias_m: Option<[f64; 3]>,
+    /// Mean of the flown position error (truth − reference) over the window (m, world).
+    #[serde(default)]
+    pub pos_err_mean_m: Option<[f64; 3]>,
 }
 
 fn rms(xs: impl Iterator<Item = f64>) -> Option<f64> {
@@ -169,6 +209,43 @@ fn rms(xs: impl Iterator<Item = f64>) -> Option<f64> {
         n += 1;
     }
     (n > 0).then(|| (s / n as f64).sqrt())
+}
+
+/// The mean over the window of `f(i)` for the ticks where it is defined.
+fn window_mean3(log: &FlightLog, f: impl Fn(usize) -> Option<[f64; 3]>) -> Option<[f64; 3]> {
+    let (mut s, mut n) = ([0.0; 3], 0usize);
+    for (i, t) in log.t_s.iter().enumerate() {
+        if *t < WINDOW_START_S - 1e-9 {
+            continue;
+        }
+        if let Some(x) = f(i) {
+            for k in 0..3 {
+                s[k] += x[k];
+            }
+            n += 1;
+        }
+    }
+    (n > 0).then(|| s.map(|x| x / n as f64))
+}
+
+/// The larger of the roll and pitch standard deviations over the window (deg).
+fn window_std_deg(log: &FlightLog) -> Option<f64> {
+    let w: Vec<&[f64; 3]> = log
+        .t_s
+        .iter()
+        .zip(&log.rpy_rad)
+        .filter(|(t, _)| **t >= WINDOW_START_S - 1e-9)
+        .map(|(_, a)| a)
+        .collect();
+    if w.len() < 2 {
+        return None;
+    }
+    let n = w.len() as f64;
+    let std = |k: usize| {
+        let m = w.iter().map(|a| a[k]).sum::<f64>() / n;
+        (w.iter().map(|a| (a[k] - m).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    Some(std(0).max(std(1)).to_degrees())
 }
 
 impl Report {
@@ -208,6 +285,20 @@ impl Report {
                 0.0
             },
             events: Vec::new(),
+            saturated_fraction: if log.saturated.is_empty() {
+                0.0
+            } else {
+                log.saturated.iter().filter(|s| **s).count() as f64 / log.saturated.len() as f64
+            },
+            att_std_deg: window_std_deg(log),
+            est_pos_bias_m: window_mean3(log, |i| {
+                let (e, p) = (log.est_p_m.get(i)?, log.p_m.get(i)?);
+                Some([e[0] - p[0], e[1] - p[1], e[2] - p[2]])
+            }),
+            pos_err_mean_m: window_mean3(log, |i| {
+                let (p, r) = (log.p_m.get(i)?, log.p_ref_m.get(i)?);
+                Some([p[0] - r[0], p[1] - r[1], p[2] - r[2]])
+            }),
         }
     }
 

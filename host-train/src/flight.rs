@@ -18,7 +18,9 @@ use crate::plant::PlantState;
 use crate::scenario::Scenario;
 use anyhow::{bail, Context, Result};
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
-use hamflight::{AdaptationLaw, FlightController, Gains, Measurement, Output, Setpoint, State};
+use hamflight::{
+    AdaptationLaw, FlightController, Gains, Measurement, Output, Setpoint, State, VehicleFacts,
+};
 use std::path::Path;
 
 /// The weight blob `adaptive` and `learned` use when none is given.
@@ -99,24 +101,27 @@ fn law_in_name(name: &str) -> AdaptationLaw {
     }
 }
 
+/// The gains a learned model flies with: those of the vehicle its blob describes (mass, hover
+/// inertia, motor lag; [`Gains::for_vehicle`]).
+pub fn gains_for(model: &LearnedModel) -> Gains {
+    Gains::for_vehicle(&VehicleFacts::of(model))
+}
+
 /// A core controller by name; `weights` (default [`DEFAULT_WEIGHTS`]) for the learned ones. A
-/// learned model flies with the gains for the mass its blob carries ([`Gains::for_mass_kg`]).
+/// learned model flies with the gains for the vehicle its blob carries ([`gains_for`]).
 pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreStep>> {
     let weights = weights.unwrap_or(Path::new(DEFAULT_WEIGHTS));
-    let learned = |gains: &dyn Fn(f32) -> Gains| -> Result<Box<dyn CoreStep>> {
+    let learned = |gains: &dyn Fn(Gains) -> Gains| -> Result<Box<dyn CoreStep>> {
         let model = load_learned(weights)?;
-        let g = gains(model.mass_kg());
+        let g = gains(gains_for(&model));
         Ok(Box::new(CoreController::new(name, model, g)))
     };
     Ok(match name {
-        "adaptive" => learned(&Gains::for_mass_kg)?,
-        "learned" => learned(&|m| Gains {
-            adapt: false,
-            ..Gains::for_mass_kg(m)
-        })?,
-        "adaptive-gradient" | "adaptive-composite" => learned(&|m| Gains {
+        "adaptive" => learned(&|g| g)?,
+        "learned" => learned(&|g| Gains { adapt: false, ..g })?,
+        "adaptive-gradient" | "adaptive-composite" => learned(&|g| Gains {
             law: law_in_name(name),
-            ..Gains::for_mass_kg(m)
+            ..g
         })?,
         "geometric-adaptive" => Box::new(geometric_adaptive()),
         "geometric-adaptive-gradient" | "geometric-adaptive-composite" => {

@@ -21,6 +21,17 @@ pub struct FlightLog {
     pub err_m: Vec<f64>,
     /// Rotor commands issued at each tick (rpm); the last tick may repeat the previous command.
     pub rpm: Vec<[f64; 4]>,
+    /// True roll, pitch, yaw at each tick (rad, Z-Y-X).
+    #[serde(default)]
+    pub rpy_rad: Vec<[f64; 3]>,
+    /// Whether the tick's rotor command sat at a limit (0 or the top speed): the mixer or the
+    /// plant saturated.
+    #[serde(default)]
+    pub saturated: Vec<bool>,
+    /// The estimated position the controller was given (m, world); empty without a sensor
+    /// chain ([`crate::sensors`]).
+    #[serde(default)]
+    pub est_p_m: Vec<[f64; 3]>,
     /// Adaptation estimate at each tick (empty vectors if the controller does not adapt).
     pub adaptation: Vec<Vec<f64>>,
     /// Time of the crash (s), if any.

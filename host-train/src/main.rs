@@ -45,6 +45,10 @@ enum Command {
     /// train N seeds, fly the calm spiral and paper-spiral on it; writes DIR/report.json and
     /// DIR/table.md, prints the table.
     VehicleStudy(host_train::vehicle_study::VehicleStudyArgs),
+    /// Measure a loop's stability margins in SITL: break the attitude loop at the plant input
+    /// (or the position loop at its measurement), inject a sine per frequency, read the return
+    /// ratio off the flight; prints crossover, phase and gain margins, writes DIR/margins.json.
+    Margins(host_train::margins::MarginsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -59,6 +63,13 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Margins(args) => {
+            let rows = host_train::margins::run(&args)?;
+            print!(
+                "{}",
+                host_train::margins::table(&args.scenario.display().to_string(), &rows)
+            );
+        }
         Command::Collect(args) => {
             let t0 = std::time::Instant::now();
             let m = host_train::collect::run(&args)?;

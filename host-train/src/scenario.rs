@@ -53,6 +53,11 @@
 //! rotor_efficiency = [1.0, 1.0, 0.9, 1.0]  # the vehicle's own rotors, in (0, 2], always on;
 //!                                # multiplies `disturbance.rotor_efficiency`
 //!
+//! [sensors]                      # optional; absent = the controller sees the (noisy) truth
+//!                                # the Crazyflie's IMU, filters, pose source and EKF in the
+//!                                # loop: see `sensors` for the keys and their defaults
+//! gyro_lpf_hz = 80.0
+//!
 //! [start]                        # optional; default: at rest, level, on p*(0) with yaw ψ*(0)
 //! position_m = [0.0, 0.0, 0.5]
 //! velocity_m_s = [0.0, 0.0, 0.0] # world frame
@@ -270,6 +275,9 @@ pub struct ScenarioSpec {
     /// The vehicle, where it differs from the CF2X.
     #[serde(default)]
     pub vehicle: VehicleSpec,
+    /// The sensor chain and estimator in the loop ([`crate::sensors`]); none = the truth.
+    #[serde(default)]
+    pub sensors: Option<crate::sensors::SensorSpec>,
     /// Initial state.
     pub start: Option<StartSpec>,
 }
@@ -494,6 +502,9 @@ fn finite_all(xs: &[f64]) -> bool {
 }
 
 fn validate(s: &ScenarioSpec) -> Result<()> {
+    if let Some(sensors) = &s.sensors {
+        sensors.validate()?;
+    }
     if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
         bail!(
             "key `duration_s`: expected a positive number of seconds, got {}",

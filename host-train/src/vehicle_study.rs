@@ -2,18 +2,20 @@
 //!
 //! 1. **Log.** Bitcraze's Lee-type geometric controller ([`crate::baselines::Geometric`], told the
 //!    vehicle's true mass and inertia, as Bitcraze's Lee is configured) flies the vehicle of
-//!    `--vehicle` (default `scenarios/mismatch-calm-spiral.toml`: 0.034 kg, inertia ×1.3,
-//!    rotor 3 at 90 %, 20 ms motor lag, rotor drag, paper-spiral-realistic's state noise)
-//!    through [`flight_plan`]: hover, circles and spirals, three in calm air and five under wind
+//!    `--vehicle` ([`VEHICLES`]: `heavy`, the default, 0.034 kg, inertia ×1.3, rotor 3 at 90 %,
+//!    20 ms motor lag; `light`, 0.030 kg, another inertia, 70 ms lag; `asym`, 0.031 kg, rotors 1
+//!    and 2 at 80 / 85 %, 30 ms lag; all with rotor drag and paper-spiral-realistic's state
+//!    noise; or a scenario file's `[vehicle]` and `[effects]`) through [`flight_plan`]: hover, circles and spirals, three in calm air and five under wind
 //!    (constant, a step, a sinusoid; one with a weak rotor), each `--flight-s` long, logged as
 //!    uSD-card deck version-2 logs at 500 Hz (`DIR/logs/*.bin`, [`crate::usdrecord`]).
 //! 2. **Import** ([`crate::import`]) with the vehicle's mass, inertia, rotor efficiencies and
 //!    `--motor-tau-s` of its motors; the calm flights are marked disturbance-free (`DIR/data`).
 //! 3. **Train** `--seeds` blobs (`DIR/seed-K.hfw` and its `.json` report, which holds the
 //!    held-out N-step errors of the learned model against the nominal one).
-//! 4. **Fly** the calm spiral and paper-spiral on that vehicle (`mismatch-calm-spiral`,
-//!    `mismatch-paper-spiral`) with [`STUDY_CONTROLLERS`]; write `DIR/report.json` and the
-//!    markdown table `DIR/table.md` ([`table`]).
+//! 4. **Fly** the vehicle's calm spiral, windy spiral and mid-flight rotor loss (for `heavy`:
+//!    `mismatch-calm-spiral`, `mismatch-paper-spiral`, `mismatch-rotor-loss`) with
+//!    [`STUDY_CONTROLLERS`], both adaptation laws; write `DIR/report.json` and the markdown
+//!    table `DIR/table.md` ([`table`]).
 //!
 //! Scores are position RMSE over t ≥ 5 s ([`crate::eval::Report::rmse_pos_window_m`]).
 
@@ -23,7 +25,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use hamflight::model::NominalModel;
-use hamflight::Gains;
+use hamflight::{Gains, VehicleFacts};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
@@ -42,8 +44,72 @@ pub const CALM_SPIRAL_TOML: &str = include_str!("../../scenarios/mismatch-calm-s
 /// paper-spiral on the heavy vehicle.
 pub const PAPER_SPIRAL_TOML: &str = include_str!("../../scenarios/mismatch-paper-spiral.toml");
 
+/// A built-in study vehicle: its name and its three scenarios (name, TOML): the calm spiral
+/// (whose `[vehicle]` and `[effects]` the logged flights use), the windy spiral, the rotor loss.
+pub struct StudyVehicle {
+    /// `--vehicle NAME`.
+    pub name: &'static str,
+    /// One line for the help text.
+    pub description: &'static str,
+    /// Calm spiral, windy spiral, mid-flight rotor loss.
+    pub scenarios: [(&'static str, &'static str); 3],
+}
+
+/// The built-in vehicles (`--vehicle heavy|light|asym`), built in so the study runs from any
+/// directory.
+pub static VEHICLES: [StudyVehicle; 3] = [
+    StudyVehicle {
+        name: "heavy",
+        description: "0.034 kg, inertia ×1.3, rotor 3 at 90 %, 20 ms motor lag",
+        scenarios: [
+            ("mismatch-calm-spiral", CALM_SPIRAL_TOML),
+            ("mismatch-paper-spiral", PAPER_SPIRAL_TOML),
+            (
+                "mismatch-rotor-loss",
+                include_str!("../../scenarios/mismatch-rotor-loss.toml"),
+            ),
+        ],
+    },
+    StudyVehicle {
+        name: "light",
+        description: "0.030 kg, inertia diag(1.50, 1.60, 2.90)e-5, 70 ms motor lag",
+        scenarios: [
+            (
+                "light-calm-spiral",
+                include_str!("../../scenarios/light-calm-spiral.toml"),
+            ),
+            (
+                "light-windy-spiral",
+                include_str!("../../scenarios/light-windy-spiral.toml"),
+            ),
+            (
+                "light-rotor-loss",
+                include_str!("../../scenarios/light-rotor-loss.toml"),
+            ),
+        ],
+    },
+    StudyVehicle {
+        name: "asym",
+        description: "0.031 kg, inertia ×1.1, rotors 1 and 2 at 80 / 85 %, 30 ms motor lag",
+        scenarios: [
+            (
+                "asym-calm-spiral",
+                include_str!("../../scenarios/asym-calm-spiral.toml"),
+            ),
+            (
+                "asym-windy-spiral",
+                include_str!("../../scenarios/asym-windy-spiral.toml"),
+            ),
+            (
+                "asym-rotor-loss",
+                include_str!("../../scenarios/asym-rotor-loss.toml"),
+            ),
+        ],
+    },
+];
+
 /// The controllers of the table, in order: (key, description).
-pub const STUDY_CONTROLLERS: [(&str, &str); 8] = [
+pub const STUDY_CONTROLLERS: [(&str, &str); 11] = [
     (
         "geometric",
         "Lee geometric (true mass and inertia; the logging controller)",
@@ -55,17 +121,26 @@ pub const STUDY_CONTROLLERS: [(&str, &str); 8] = [
     ("ida-pbc-true", "nominal IDA-PBC, TRUE mass and inertia"),
     (
         "geometric-adaptive",
-        "geometric-adaptive (nominal, stock constants)",
+        "geometric-adaptive (nominal, stock constants), gradient law",
+    ),
+    (
+        "geometric-adaptive-composite",
+        "geometric-adaptive (nominal, stock constants), composite law",
     ),
     ("learned", "learned, no adaptation"),
-    ("adaptive", "adaptive (learned)"),
+    ("adaptive", "adaptive (learned), gradient law"),
+    ("adaptive-composite", "adaptive (learned), composite law"),
     (
         "learned-no-lag",
         "learned, no adaptation, trained on the commanded wrench (no --motor-tau-s)",
     ),
     (
         "adaptive-no-lag",
-        "adaptive (learned), trained on the commanded wrench (no --motor-tau-s)",
+        "adaptive (learned), gradient law, trained on the commanded wrench (no --motor-tau-s)",
+    ),
+    (
+        "adaptive-composite-no-lag",
+        "adaptive (learned), composite law, trained on the commanded wrench (no --motor-tau-s)",
     ),
 ];
 
@@ -87,16 +162,23 @@ pub struct VehicleStudyArgs {
     /// Length of each logged training flight (s); eight flights.
     #[arg(long, default_value_t = 10.0)]
     pub flight_s: f64,
-    /// Scenario file whose `[vehicle]` and `[effects]` the logged flights use (default: the
-    /// built-in mismatch-calm-spiral).
-    #[arg(long, value_name = "FILE")]
-    pub vehicle: Option<PathBuf>,
-    /// The calm scenario flown for the table (default: built-in mismatch-calm-spiral).
+    /// The vehicle: `heavy` (default; 0.034 kg, inertia ×1.3, rotor 3 at 90 %, 20 ms motor
+    /// lag), `light` (0.030 kg, another inertia, 70 ms lag) or `asym` (0.031 kg, rotors 1 and 2
+    /// at 80 / 85 %, 30 ms lag), each with rotor drag and noisy state estimates and its calm
+    /// spiral, windy spiral and rotor loss; or a scenario file whose `[vehicle]` and `[effects]`
+    /// the logged flights use (then the heavy vehicle's scenarios are flown unless --calm,
+    /// --disturbed and --rotor-loss name others).
+    #[arg(long, value_name = "NAME|FILE", default_value = "heavy")]
+    pub vehicle: String,
+    /// The calm scenario flown for the table (default: the vehicle's calm spiral).
     #[arg(long, value_name = "FILE")]
     pub calm: Option<PathBuf>,
-    /// The disturbed scenario flown for the table (default: built-in mismatch-paper-spiral).
+    /// The windy scenario flown for the table (default: the vehicle's windy spiral).
     #[arg(long, value_name = "FILE")]
     pub disturbed: Option<PathBuf>,
+    /// The rotor-loss scenario flown for the table (default: the vehicle's rotor loss).
+    #[arg(long, value_name = "FILE")]
+    pub rotor_loss: Option<PathBuf>,
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -111,9 +193,10 @@ impl VehicleStudyArgs {
             no_lag_comparison: false,
             epochs: 20,
             flight_s: 10.0,
-            vehicle: None,
+            vehicle: "heavy".into(),
             calm: None,
             disturbed: None,
+            rotor_loss: None,
             quiet: true,
         }
     }
@@ -291,8 +374,8 @@ pub struct StudyReport {
     pub seeds: Vec<SeedSummary>,
     /// Every flight of the table.
     pub flights: Vec<Flown>,
-    /// Calm and disturbed scenario names.
-    pub scenarios: [String; 2],
+    /// The scenarios flown: calm spiral, windy spiral, rotor loss.
+    pub scenarios: Vec<String>,
     /// Wall time of the study (s).
     pub wall_s: f64,
 }
@@ -339,21 +422,26 @@ fn fly_one(sc: &Scenario, key: &str, seed: Option<u64>, ctrl: &mut dyn Controlle
 /// or I/O error.
 pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     let t0 = Instant::now();
-    let base = load_or_builtin(
-        args.vehicle.as_deref(),
-        CALM_SPIRAL_TOML,
-        "mismatch-calm-spiral",
-    )?;
-    let calm = load_or_builtin(
-        args.calm.as_deref(),
-        CALM_SPIRAL_TOML,
-        "mismatch-calm-spiral",
-    )?;
-    let disturbed = load_or_builtin(
-        args.disturbed.as_deref(),
-        PAPER_SPIRAL_TOML,
-        "mismatch-paper-spiral",
-    )?;
+    let named = VEHICLES.iter().find(|v| v.name == args.vehicle);
+    let builtin = named.unwrap_or(&VEHICLES[0]);
+    let [calm_b, windy_b, loss_b] = builtin.scenarios;
+    let base = match named {
+        Some(_) => load_or_builtin(None, calm_b.1, calm_b.0)?,
+        None if Path::new(&args.vehicle).exists() => Scenario::load(Path::new(&args.vehicle))?,
+        None => {
+            let names: Vec<&str> = VEHICLES.iter().map(|v| v.name).collect();
+            anyhow::bail!(
+                "--vehicle `{}`: expected one of {} or a scenario file",
+                args.vehicle,
+                names.join(", ")
+            )
+        }
+    };
+    let flown = [
+        load_or_builtin(args.calm.as_deref(), calm_b.1, calm_b.0)?,
+        load_or_builtin(args.disturbed.as_deref(), windy_b.1, windy_b.0)?,
+        load_or_builtin(args.rotor_loss.as_deref(), loss_b.1, loss_b.0)?,
+    ];
     let logs_dir = args.out.join("logs");
     std::fs::create_dir_all(&logs_dir)
         .with_context(|| format!("cannot create `{}`", logs_dir.display()))?;
@@ -441,6 +529,10 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
         let cfg = TrainConfig {
             epochs: args.epochs,
             seed,
+            // The comparison blob is trained on the wrench without the motor-lag filter, but it
+            // still tells the controller the vehicle's lag (its gains and lag compensation come
+            // from it): the comparison is of the training data, not of the vehicle facts.
+            motor_tau_s: (!lag && tau > 0.0).then_some(tau),
             ..TrainConfig::default()
         };
         let (dir, blob) = if lag {
@@ -473,7 +565,7 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     let mass = v.mass_kg as f32;
     let inertia = Matrix3::from_diagonal(&Vector3::from(v.inertia_kg_m2.map(|x| x as f32)));
     let mut flights = Vec::new();
-    for sc in [&calm, &disturbed] {
+    for sc in &flown {
         flights.push(fly_one(
             sc,
             "geometric",
@@ -481,23 +573,22 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
             crate::baselines::by_name("geometric", sc)?.as_mut(),
         ));
         flights.push(fly_one(sc, "ida-pbc-stock", None, &mut flight::ida_pbc()));
+        let true_model = NominalModel::new(mass, inertia);
         let mut true_nominal = CoreController::new(
             "ida-pbc-true",
-            NominalModel::new(mass, inertia),
+            true_model,
             Gains {
                 adapt: false,
-                ..Gains::for_mass_kg(mass)
+                ..Gains::for_vehicle(&VehicleFacts::of(&true_model))
             },
         );
         flights.push(fly_one(sc, "ida-pbc-true", None, &mut true_nominal));
-        flights.push(fly_one(
-            sc,
-            "geometric-adaptive",
-            None,
-            &mut flight::geometric_adaptive(),
-        ));
+        for key in ["geometric-adaptive", "geometric-adaptive-composite"] {
+            let mut c = flight::core_by_name(key, None)?;
+            flights.push(fly_one(sc, key, None, c.as_mut()));
+        }
         for (seed, lag, blob) in &blobs {
-            for key in ["learned", "adaptive"] {
+            for key in ["learned", "adaptive", "adaptive-composite"] {
                 let mut c = flight::core_by_name(key, Some(blob))?;
                 let label = if *lag {
                     key.to_string()
@@ -514,7 +605,7 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
         logs: kept,
         seeds,
         flights,
-        scenarios: [calm.name.clone(), disturbed.name.clone()],
+        scenarios: flown.iter().map(|sc| sc.name.clone()).collect(),
         wall_s: t0.elapsed().as_secs_f64(),
     };
     write_json_atomic(&args.out.join("report.json"), &report)?;
@@ -533,8 +624,13 @@ fn cm(f: &Flown) -> String {
 /// The markdown table: position RMSE (cm, t ≥ 5 s) per controller and scenario (learned ones
 /// per seed), then the held-out N-step errors and the learned J per seed.
 pub fn table(r: &StudyReport) -> String {
-    let [a, b] = &r.scenarios;
-    let mut s = format!("| controller | {a} (cm) | {b} (cm) |\n| --- | --- | --- |\n");
+    let mut s = String::from("| controller |");
+    for sc in &r.scenarios {
+        s += &format!(" {sc} (cm) |");
+    }
+    s += "\n| --- |";
+    s += &" --- |".repeat(r.scenarios.len());
+    s += "\n";
     for (key, desc) in STUDY_CONTROLLERS {
         let cell = |sc: &str| {
             r.results(key, sc)
@@ -543,8 +639,11 @@ pub fn table(r: &StudyReport) -> String {
                 .collect::<Vec<_>>()
                 .join(" / ")
         };
+        let Some(first) = r.scenarios.first() else {
+            break;
+        };
         let seeds: Vec<String> = r
-            .results(key, a)
+            .results(key, first)
             .iter()
             .filter_map(|f| f.seed)
             .map(|k| k.to_string())
@@ -557,7 +656,11 @@ pub fn table(r: &StudyReport) -> String {
         } else {
             format!("{desc}, seed {}", seeds.join(" / "))
         };
-        s += &format!("| {label} | {} | {} |\n", cell(a), cell(b));
+        s += &format!("| {label} |");
+        for sc in &r.scenarios {
+            s += &format!(" {} |", cell(sc));
+        }
+        s += "\n";
     }
     s += "\n| seed | command | windows (train / held out) | held-out last-step error, rate (rad/s): learned / nominal stock / nominal true | velocity (m/s): learned / nominal stock / nominal true | learned diag J (1e-5 kg·m²) | learned thrust gain |\n| --- | --- | --- | --- | --- | --- | --- |\n";
     for sd in &r.seeds {

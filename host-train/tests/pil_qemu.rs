@@ -405,9 +405,10 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
     if rate == Rate::Hz1000 {
         features.push_str(",loop-1khz");
     }
-    let gains = Gains {
+    // The firmware's gains (firmware/src/control_loop.rs `default_gains`): the model's vehicle.
+    let gains_of = |facts: hamflight::VehicleFacts| Gains {
         law,
-        ..Gains::default()
+        ..Gains::for_vehicle(&facts)
     };
     assert!(
         qemu_available(),
@@ -507,7 +508,10 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
     let log_host = match hello.model {
         ModelKind::Nominal => {
             let mut native = NativeController {
-                inner: FlightController::new(NominalModel::default(), gains),
+                inner: FlightController::new(
+                    NominalModel::default(),
+                    gains_of(hamflight::VehicleFacts::of(&NominalModel::default())),
+                ),
                 dt_s,
             };
             fly(&scenario, &mut native)
@@ -524,6 +528,7 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
             );
             let model =
                 LearnedModel::from_blob(&blob).unwrap_or_else(|e| panic!("{}: {e}", wp.display()));
+            let gains = gains_of(hamflight::VehicleFacts::of(&model));
             let mut native = NativeController {
                 inner: FlightController::new(model, gains),
                 dt_s,

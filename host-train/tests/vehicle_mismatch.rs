@@ -192,7 +192,7 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     };
     let r = vehicle_study::run(&args).unwrap();
     println!("{}", vehicle_study::table(&r));
-    let [calm, windy] = r.scenarios.clone();
+    let (calm, windy) = (r.scenarios[0].clone(), r.scenarios[1].clone());
 
     // Nothing crashes.
     for f in &r.flights {

@@ -18,8 +18,8 @@
 //!   at every attitude, and so extrapolates to winds larger than in training.
 
 use super::{
-    DisturbanceNet, HamiltonianModel, ModelTerms, ModelWeights, State, StateDerivative, FEATURES,
-    GAIN_IN, GAIN_OUT, GRAVITY_M_S2, JINV_OUT, MASS_KG,
+    DisturbanceNet, HamiltonianModel, ModelTerms, ModelWeights, State, StateDerivative,
+    DEFAULT_MOTOR_TAU_S, FEATURES, GAIN_IN, GAIN_OUT, GRAVITY_M_S2, JINV_OUT, MASS_KG,
 };
 use crate::blob::{self, BlobError};
 use nalgebra::{Matrix3, SMatrix, Vector3, Vector4};
@@ -51,25 +51,48 @@ pub const CONTROL_SCALE: [f32; 4] = [
     TORQUE_SCALE_NM,
 ];
 
-/// The learned Hamiltonian model: the networks θ (J⁻¹, g) and φ (W) of a weight blob.
+/// The learned Hamiltonian model: the networks θ (J⁻¹, g) and φ (W) of a weight blob, and the
+/// vehicle's motor lag the blob carries.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LearnedModel {
     /// The learned parameters.
     pub weights: ModelWeights,
+    /// The motor time constant's f32 bits XOR those of [`DEFAULT_MOTOR_TAU_S`]: zero bits are
+    /// the default lag, so [`LearnedModel::new`] of [`ModelWeights::ZERO`] stays all-zero (a
+    /// `static` of it in `.bss`, not a 10 KB initializer in flash), and any lag round-trips
+    /// exactly ([`LearnedModel::motor_tau_s`], [`LearnedModel::with_motor_tau_s`]).
+    motor_tau_bits: u32,
 }
 
 impl LearnedModel {
-    /// Wraps trained weights.
+    /// Wraps trained weights, with the default motor lag ([`DEFAULT_MOTOR_TAU_S`]).
     pub const fn new(weights: ModelWeights) -> Self {
-        Self { weights }
+        Self {
+            weights,
+            motor_tau_bits: 0,
+        }
     }
 
-    /// Decodes and checks a weight blob ([`blob::decode`]).
+    /// The same model on a vehicle whose motors have the first-order time constant
+    /// `motor_tau_s` (s): the lag the composite law's prediction assumes. The blob's value is
+    /// checked at decode (in [0, [`crate::model::MAX_MOTOR_TAU_S`]] s).
+    #[must_use]
+    pub const fn with_motor_tau_s(self, motor_tau_s: f32) -> Self {
+        Self {
+            motor_tau_bits: motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits(),
+            ..self
+        }
+    }
+
+    /// Decodes and checks a weight blob ([`blob::decode_model_into`]): the networks, the mass
+    /// and the motor lag (the default for blobs before format version 3).
     ///
     /// # Errors
     /// Any [`BlobError`] of [`blob::decode`].
     pub fn from_blob(bytes: &[u8]) -> Result<Self, BlobError> {
-        blob::decode(bytes).map(Self::new)
+        let mut out = Self::new(ModelWeights::ZERO);
+        blob::decode_model_into(bytes, &mut out)?;
+        Ok(out)
     }
 
     /// J⁻¹(q) (1/(kg·m²)), body frame.
@@ -133,6 +156,11 @@ impl LearnedModel {
 impl HamiltonianModel for LearnedModel {
     fn mass_kg(&self) -> f32 {
         self.weights.mass_kg
+    }
+
+    /// The blob's motor lag ([`LearnedModel::with_motor_tau_s`]).
+    fn motor_tau_s(&self) -> f32 {
+        f32::from_bits(self.motor_tau_bits ^ DEFAULT_MOTOR_TAU_S.to_bits())
     }
 
     fn terms(&self, state: &State) -> ModelTerms {

@@ -25,6 +25,13 @@ pub const MIN_MASS_KG: f32 = 0.005;
 pub const MAX_MASS_KG: f32 = 5.0;
 /// Gravitational acceleration (m/s²), as in the SITL plant and gym-pybullet-drones.
 pub const GRAVITY_M_S2: f32 = 9.8;
+/// The motors' first-order time constant (s) assumed for a model that does not carry its own
+/// (the nominal model, and weight blobs written before the lag was data): the lag the composite
+/// law's prediction assumed before it came from the vehicle.
+pub const DEFAULT_MOTOR_TAU_S: f32 = 0.05;
+/// The largest motor time constant a weight blob may carry (s): a first-order lag longer than
+/// this is no quadrotor's motor (a Crazyflie's is 20–70 ms).
+pub const MAX_MOTOR_TAU_S: f32 = 1.0;
 
 /// What the controller needs of a model at one state, evaluated once per control step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,6 +59,13 @@ pub trait HamiltonianModel {
         self.terms(&State::default()).mass_kg
     }
 
+    /// The vehicle's motor time constant (s), from the blob where it carries one, else
+    /// [`DEFAULT_MOTOR_TAU_S`]: what the composite law's prediction and the attitude gains
+    /// assume ([`crate::control::VehicleFacts`]).
+    fn motor_tau_s(&self) -> f32 {
+        DEFAULT_MOTOR_TAU_S
+    }
+
     /// The state derivative of paper eq. 1 (Hamilton's equations on SE(3)) and eq. 2 (ζ̇) under
     /// the control `u` = [f (N); τ (N·m)] and the disturbance d = W(q, 𝔭) `a`.
     ///
@@ -71,6 +85,10 @@ impl<M: HamiltonianModel + ?Sized> HamiltonianModel for &M {
 
     fn mass_kg(&self) -> f32 {
         (**self).mass_kg()
+    }
+
+    fn motor_tau_s(&self) -> f32 {
+        (**self).motor_tau_s()
     }
 
     fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {

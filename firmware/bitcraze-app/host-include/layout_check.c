@@ -8,7 +8,7 @@
 
 #include "hamflight.h"
 
-const uint32_t hf_c_layout[54] = {
+const uint32_t hf_c_layout[61] = {
     sizeof(hf_controller_t),
     _Alignof(hf_controller_t),
     sizeof(hf_state_t),
@@ -62,5 +62,12 @@ const uint32_t hf_c_layout[54] = {
     _Alignof(hf_setpoint_t),
     _Alignof(hf_output_t),
     _Alignof(hf_gains_t),
+    sizeof(hf_composite_t),
+    offsetof(hf_composite_t, q_force),
+    offsetof(hf_composite_t, q_torque),
+    offsetof(hf_composite_t, r_force),
+    offsetof(hf_composite_t, r_torque),
+    HF_LAW_GRADIENT,
+    HF_LAW_COMPOSITE,
     0xC0DE,
 };

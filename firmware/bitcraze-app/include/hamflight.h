@@ -57,6 +57,10 @@ extern "C" {
 #define HF_ERR_BAD_GAINS 1u  /* a gain was NaN, infinite, negative, or max_tilt_rad not in (0, pi/2) */
 #define HF_ERR_NULL 2u       /* NULL pointer, or the controller was never hf_init'ed */
 
+/* Adaptation laws (hf_set_law). */
+#define HF_LAW_GRADIENT 0u   /* the paper's gradient law on the tracking errors */
+#define HF_LAW_COMPOSITE 1u  /* the composite law: also the model's prediction error, Kalman gain */
+
 /* Opaque controller storage. Zero it (static storage is) or call hf_init before any other call:
  * a zeroed controller reports HF_FAULT_NOT_INIT and gives a zero wrench. */
 typedef struct hf_controller {
@@ -108,6 +112,15 @@ typedef struct hf_gains {
   float a_max;         /* projection radius: |a| never exceeds it */
 } hf_gains_t;
 
+/* The composite law's Kalman tuning, in the units of a (force features m/s^2, torque features
+ * 1e-3 N*m). 16 bytes. */
+typedef struct hf_composite {
+  float q_force;   /* process noise Q of the force columns of a, per second (>= 0) */
+  float q_torque;  /* process noise Q of the torque columns of a, per second (>= 0) */
+  float r_force;   /* measurement variance R of the force rows, per sample (> 0) */
+  float r_torque;  /* measurement variance R of the torque rows, per sample (> 0) */
+} hf_composite_t;
+
 /* Initialise: the compiled-in model, default gains, adaptation on, a = 0. NULL is ignored. */
 void hf_init(hf_controller_t *ctl);
 
@@ -125,6 +138,27 @@ void hf_get_gains(const hf_controller_t *ctl, hf_gains_t *out);
 
 /* Set the gains; HF_OK, or HF_ERR_BAD_GAINS / HF_ERR_NULL with the gains left unchanged. */
 uint32_t hf_set_gains(hf_controller_t *ctl, const hf_gains_t *gains);
+
+/* Select the adaptation law (HF_LAW_*): HF_OK, HF_ERR_BAD_GAINS for another value, HF_ERR_NULL.
+ * A change of law resets the adaptation (a = 0, P restarted); the same law is a no-op. Switch
+ * only while not flying: the shim applies hamflight.law only off the air. */
+uint32_t hf_set_law(hf_controller_t *ctl, uint32_t law);
+/* The law in use (HF_LAW_GRADIENT if ctl is not initialised). */
+uint32_t hf_get_law(const hf_controller_t *ctl);
+
+/* The composite law's Q and R: HF_OK, or HF_ERR_BAD_GAINS (Q < 0, R <= 0, NaN, infinite) /
+ * HF_ERR_NULL with the tuning unchanged. Takes effect at the next step, whichever law runs. */
+uint32_t hf_set_composite(hf_controller_t *ctl, const hf_composite_t *tuning);
+/* Copy the composite law's Q and R into *out (zeros if ctl is not initialised). */
+void hf_get_composite(const hf_controller_t *ctl, hf_composite_t *out);
+
+/* The composite law's prediction error of its last update, eps = measured - predicted
+ * disturbance force in the units of a, rows force x, y, z (m/s^2) then torque x, y, z
+ * (1e-3 N*m); false (and zeros) before its first update, after a reset and under the gradient
+ * law. */
+bool hf_get_prediction_error(const hf_controller_t *ctl, float eps[6]);
+/* The trace of the composite law's gain P (0 before its first update and after a reset). */
+float hf_p_trace(const hf_controller_t *ctl);
 
 /* Switch the adaptation law on or off (off freezes a; it does not reset it). */
 void hf_set_adapt(hf_controller_t *ctl, bool on);

@@ -3,7 +3,7 @@
 //! Every type here has a twin in the header; `header_layout_matches_rust` (below) compares the
 //! sizes, offsets and constants the host C compiler sees with these.
 
-use hamflight::adapt::AdaptationRates;
+use hamflight::adapt::{AdaptationLaw, AdaptationRates, CompositeGains};
 use hamflight::{Faults, Gains, Setpoint, State};
 use nalgebra::{Matrix3, Vector3};
 
@@ -39,6 +39,11 @@ pub const OK: u32 = 0;
 pub const ERR_BAD_GAINS: u32 = 1;
 /// `HF_ERR_NULL`.
 pub const ERR_NULL: u32 = 2;
+
+/// `HF_LAW_GRADIENT`: the paper's gradient adaptation law.
+pub const LAW_GRADIENT: u32 = 0;
+/// `HF_LAW_COMPOSITE`: the composite (prediction-error, Kalman-gain) adaptation law.
+pub const LAW_COMPOSITE: u32 = 1;
 
 /// `hf_controller_t`: opaque storage the C side owns (zeroed or `hf_init`ed).
 #[repr(C, align(8))]
@@ -209,8 +214,8 @@ impl HfGains {
         if !(tilt_ok && all.iter().all(|v| v.is_finite() && *v >= 0.0)) {
             return None;
         }
-        // The law, the composite law's tuning and the robust options are not in the C API:
-        // they keep the core's defaults.
+        // The robust options are not in the C API: they keep the core's defaults. The law and
+        // the composite law's tuning have their own calls (`hf_set_gains` keeps them).
         let defaults = Gains::default();
         Some(Gains {
             k_p: self.k_p,
@@ -229,6 +234,67 @@ impl HfGains {
             adapt,
             ..defaults
         })
+    }
+}
+
+/// `hf_composite_t`: the composite law's Kalman tuning (the rest of
+/// [`hamflight::adapt::CompositeGains`] keeps its values).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HfComposite {
+    /// Process noise Q of the force columns of a ((m/s²)² per second).
+    pub q_force: f32,
+    /// Process noise Q of the torque columns of a ((1e-3 N·m)² per second).
+    pub q_torque: f32,
+    /// Measurement variance R of the force rows, per sample ((m/s²)²).
+    pub r_force: f32,
+    /// Measurement variance R of the torque rows, per sample ((1e-3 N·m)²).
+    pub r_torque: f32,
+}
+
+impl HfComposite {
+    /// From the core's composite gains.
+    pub fn from_core(g: &CompositeGains) -> Self {
+        Self {
+            q_force: g.q_force,
+            q_torque: g.q_torque,
+            r_force: g.r_force,
+            r_torque: g.r_torque,
+        }
+    }
+
+    /// `base` with this Q and R, or `None` unless Q ≥ 0 and R > 0, all finite.
+    pub fn to_core(&self, base: &CompositeGains) -> Option<CompositeGains> {
+        let q_ok = [self.q_force, self.q_torque]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0);
+        let r_ok = [self.r_force, self.r_torque]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0);
+        (q_ok && r_ok).then_some(CompositeGains {
+            q_force: self.q_force,
+            q_torque: self.q_torque,
+            r_force: self.r_force,
+            r_torque: self.r_torque,
+            ..*base
+        })
+    }
+}
+
+/// The core's law for `HF_LAW_*`, `None` for any other value.
+pub fn law_from_c(law: u32) -> Option<AdaptationLaw> {
+    match law {
+        LAW_GRADIENT => Some(AdaptationLaw::Gradient),
+        LAW_COMPOSITE => Some(AdaptationLaw::Composite),
+        _ => None,
+    }
+}
+
+/// `HF_LAW_*` of the core's law.
+pub fn law_to_c(law: AdaptationLaw) -> u32 {
+    match law {
+        AdaptationLaw::Gradient => LAW_GRADIENT,
+        AdaptationLaw::Composite => LAW_COMPOSITE,
     }
 }
 
@@ -259,7 +325,7 @@ mod tests {
         static hf_c_layout: [u32; LAYOUT_LEN];
     }
 
-    const LAYOUT_LEN: usize = 54;
+    const LAYOUT_LEN: usize = 61;
 
     /// The same list, in the same order, as Rust sees it.
     fn rust_layout() -> [u32; LAYOUT_LEN] {
@@ -317,6 +383,13 @@ mod tests {
             align_of::<HfSetpoint>(),
             align_of::<HfOutput>(),
             align_of::<HfGains>(),
+            size_of::<HfComposite>(),
+            offset_of!(HfComposite, q_force),
+            offset_of!(HfComposite, q_torque),
+            offset_of!(HfComposite, r_force),
+            offset_of!(HfComposite, r_torque),
+            LAW_GRADIENT as usize,
+            LAW_COMPOSITE as usize,
             0xC0DE,
         ];
         v.map(|x| x as u32)

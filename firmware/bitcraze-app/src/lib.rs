@@ -24,9 +24,9 @@ extern crate std;
 
 pub mod abi;
 
-use abi::{HfController, HfGains, HfOutput, HfSetpoint, HfState};
+use abi::{HfComposite, HfController, HfGains, HfOutput, HfSetpoint, HfState};
 use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
-use hamflight::{FlightController, Gains, Setpoint, State};
+use hamflight::{FlightController, Gains, Setpoint, State, VehicleFacts};
 
 /// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
 pub mod model {
@@ -89,7 +89,10 @@ pub unsafe extern "C" fn hf_init(ctl: *mut HfController) {
     let inner = Inner {
         magic: MAGIC,
         last_faults: abi::FAULT_NOT_INIT,
-        ctl: FlightController::new(&model::MODEL, Gains::for_mass_kg(model::MODEL.mass_kg())),
+        ctl: FlightController::new(
+            &model::MODEL,
+            Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
+        ),
     };
     // SAFETY: non-null, writable and large and aligned enough (asserted above).
     unsafe { ctl.cast::<Inner>().write(inner) };
@@ -185,11 +188,116 @@ pub unsafe extern "C" fn hf_set_gains(ctl: *mut HfController, gains: *const HfGa
     };
     match gains.to_core(inner.ctl.gains.adapt) {
         Some(g) => {
-            inner.ctl.gains = g;
+            // The law and the composite law's tuning have their own calls, and the vehicle's
+            // lag compensation and velocity consistency are not in the C API: kept.
+            let cur = &inner.ctl.gains;
+            inner.ctl.gains = Gains {
+                law: cur.law,
+                composite: cur.composite,
+                lag: cur.lag,
+                velocity_consistency_tau_s: cur.velocity_consistency_tau_s,
+                ..g
+            };
             abi::OK
         }
         None => abi::ERR_BAD_GAINS,
     }
+}
+
+/// `hf_set_law`: `HF_OK`, `HF_ERR_BAD_GAINS` for an unknown law, `HF_ERR_NULL`. A change of
+/// law resets the adaptation.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_set_law(ctl: *mut HfController, law: u32) -> u32 {
+    // SAFETY: the caller's contract.
+    let Some(inner) = (unsafe { inner_mut(ctl) }) else {
+        return abi::ERR_NULL;
+    };
+    let Some(law) = abi::law_from_c(law) else {
+        return abi::ERR_BAD_GAINS;
+    };
+    if inner.ctl.gains.law != law {
+        inner.ctl.gains.law = law;
+        inner.ctl.reset();
+    }
+    abi::OK
+}
+
+/// `hf_get_law`: `HF_LAW_GRADIENT` if `ctl` is not initialised.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_law(ctl: *const HfController) -> u32 {
+    // SAFETY: the caller's contract.
+    unsafe { inner_ref(ctl) }.map_or(abi::LAW_GRADIENT, |i| abi::law_to_c(i.ctl.gains.law))
+}
+
+/// `hf_set_composite`: the composite law's Q and R; `HF_OK`, or an error with them unchanged.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `tuning` null or valid.
+#[no_mangle]
+pub unsafe extern "C" fn hf_set_composite(
+    ctl: *mut HfController,
+    tuning: *const HfComposite,
+) -> u32 {
+    // SAFETY: the caller's contract.
+    let (Some(inner), Some(t)) = (unsafe { inner_mut(ctl) }, unsafe { tuning.as_ref() }) else {
+        return abi::ERR_NULL;
+    };
+    match t.to_core(&inner.ctl.gains.composite) {
+        Some(c) => {
+            inner.ctl.gains.composite = c;
+            abi::OK
+        }
+        None => abi::ERR_BAD_GAINS,
+    }
+}
+
+/// `hf_get_composite`: zeros if `ctl` is not initialised.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `out` null or writable.
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_composite(ctl: *const HfController, out: *mut HfComposite) {
+    // SAFETY: the caller's contract.
+    let (inner, out) = unsafe { (inner_ref(ctl), out.as_mut()) };
+    if let Some(out) = out {
+        *out = inner
+            .map(|i| HfComposite::from_core(&i.ctl.gains.composite))
+            .unwrap_or_default();
+    }
+}
+
+/// `hf_get_prediction_error`: the composite law's last ε; false and zeros if there is none.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `eps` null or valid for 6 floats.
+#[no_mangle]
+pub unsafe extern "C" fn hf_get_prediction_error(
+    ctl: *const HfController,
+    eps: *mut [f32; 6],
+) -> bool {
+    // SAFETY: the caller's contract.
+    let (inner, eps) = unsafe { (inner_ref(ctl), eps.as_mut()) };
+    let e = inner.and_then(|i| i.ctl.adaptation().prediction_error());
+    if let Some(out) = eps {
+        *out = e.map_or([0.0; 6], Into::into);
+    }
+    e.is_some()
+}
+
+/// `hf_p_trace`: the trace of the composite law's P (0 before its first update).
+///
+/// # Safety
+/// `ctl` as for [`hf_step`].
+#[no_mangle]
+pub unsafe extern "C" fn hf_p_trace(ctl: *const HfController) -> f32 {
+    // SAFETY: the caller's contract.
+    unsafe { inner_ref(ctl) }.map_or(0.0, |i| i.ctl.adaptation().p.trace())
 }
 
 /// `hf_set_adapt`: the adaptation law on or off (off freezes a).
@@ -243,7 +351,10 @@ pub unsafe extern "C" fn hf_last_faults(ctl: *const HfController) -> u32 {
 #[no_mangle]
 pub extern "C" fn hf_self_test() -> bool {
     let mass_kg = model::MODEL.mass_kg();
-    let mut ctl = FlightController::new(&model::MODEL, Gains::for_mass_kg(mass_kg));
+    let mut ctl = FlightController::new(
+        &model::MODEL,
+        Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
+    );
     let o = ctl.step(&State::default(), &Setpoint::default(), 0.002);
     let weight_n = mass_kg * GRAVITY_M_S2;
     !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n

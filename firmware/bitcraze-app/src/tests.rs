@@ -96,8 +96,10 @@ fn null_pointers_are_reported_not_dereferenced() {
 #[test]
 fn steps_match_the_native_controller_bit_for_bit() {
     let mut c = init();
-    let mut native =
-        FlightController::new(&model::MODEL, Gains::for_mass_kg(model::MODEL.mass_kg()));
+    let mut native = FlightController::new(
+        &model::MODEL,
+        Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
+    );
     let (s, sp) = (displaced(), hover_sp());
     for _ in 0..50 {
         let out = step(&mut c, &s, &sp, 0.002);
@@ -161,7 +163,10 @@ fn gains_round_trip_and_bad_gains_are_refused() {
     let mut g = HfGains::default();
     // SAFETY: valid pointers throughout.
     unsafe { hf_get_gains(&c, &mut g) };
-    assert_eq!(g, HfGains::from_core(&Gains::default()));
+    assert_eq!(
+        g,
+        HfGains::from_core(&Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)))
+    );
     let stiffer = HfGains {
         k_p: 2.0 * g.k_p,
         ..g
@@ -200,4 +205,85 @@ fn self_test_passes_and_mass_is_the_blobs() {
     let from_blob = hamflight::blob::decode(&bytes).expect("a valid blob");
     assert_eq!(hf_mass_kg(), from_blob.mass_kg);
     assert!(hf_mass_kg() > 0.0);
+}
+
+#[test]
+fn law_selection_composite_tuning_and_diagnostics() {
+    let mut c = init();
+    let mut eps = [f32::NAN; 6];
+    // SAFETY: valid pointers throughout; null ones are reported.
+    unsafe {
+        assert_eq!(hf_get_law(&c), LAW_GRADIENT);
+        assert_eq!(hf_set_law(&mut c, 7), ERR_BAD_GAINS);
+        assert_eq!(hf_set_law(ptr::null_mut(), LAW_COMPOSITE), ERR_NULL);
+        assert_eq!(hf_get_law(ptr::null()), LAW_GRADIENT);
+        assert!(!hf_get_prediction_error(&c, &mut eps));
+        assert_eq!((eps, hf_p_trace(&c)), ([0.0; 6], 0.0));
+    }
+    // Under the gradient law the composite diagnostics stay empty.
+    for _ in 0..5 {
+        step(&mut c, &displaced(), &hover_sp(), 0.002);
+    }
+    // SAFETY: as above.
+    unsafe {
+        assert!(!hf_get_prediction_error(&c, &mut eps));
+        assert_eq!(hf_set_law(&mut c, LAW_COMPOSITE), OK);
+        assert_eq!(hf_get_law(&c), LAW_COMPOSITE);
+    }
+    assert_eq!(estimate(&c), [0.0; FEATURES], "a change of law resets a");
+    // The composite law as the core runs it, bit for bit.
+    let gains = Gains {
+        law: hamflight::AdaptationLaw::Composite,
+        ..Gains::for_vehicle(&VehicleFacts::of(&model::MODEL))
+    };
+    let mut native = FlightController::new(&model::MODEL, gains);
+    for _ in 0..5 {
+        let out = step(&mut c, &displaced(), &hover_sp(), 0.002);
+        let n = native.step_measured(
+            &displaced().to_core(),
+            &hover_sp().to_core(),
+            // displaced() carries no accelerometer (specific_force_valid = 0).
+            &hamflight::adapt::Measurement::default(),
+            0.002,
+        );
+        assert_eq!(out.thrust_n, n.wrench.thrust_n);
+    }
+    // SAFETY: as above.
+    unsafe {
+        assert!(hf_get_prediction_error(&c, &mut eps));
+        let e: [f32; 6] = native.adaptation().prediction_error().unwrap().into();
+        assert_eq!(eps, e);
+        assert_eq!(hf_p_trace(&c), native.adaptation().p.trace());
+        assert!(hf_p_trace(&c) > 0.0);
+    }
+    assert_eq!(estimate(&c), <[f32; FEATURES]>::from(native.estimate()));
+
+    // Q and R: refused values leave the tuning alone; hf_set_gains keeps law and tuning.
+    let mut t = HfComposite::default();
+    // SAFETY: as above.
+    unsafe {
+        hf_get_composite(&c, &mut t);
+        let d = hamflight::adapt::CompositeGains::default();
+        assert_eq!(t, HfComposite::from_core(&d));
+        for bad in [
+            HfComposite { q_force: -1.0, ..t },
+            HfComposite { r_torque: 0.0, ..t },
+            HfComposite {
+                r_force: f32::NAN,
+                ..t
+            },
+        ] {
+            assert_eq!(hf_set_composite(&mut c, &bad), ERR_BAD_GAINS);
+        }
+        assert_eq!(hf_set_composite(&mut c, ptr::null()), ERR_NULL);
+        let new = HfComposite { q_force: 2.0, ..t };
+        assert_eq!(hf_set_composite(&mut c, &new), OK);
+        let mut g = HfGains::default();
+        hf_get_gains(&c, &mut g);
+        assert_eq!(hf_set_gains(&mut c, &g), OK);
+        let mut back = HfComposite::default();
+        hf_get_composite(&c, &mut back);
+        assert_eq!(back, new);
+        assert_eq!(hf_get_law(&c), LAW_COMPOSITE);
+    }
 }

@@ -94,8 +94,26 @@ mod bench {
     use libm::{cosf, sinf};
     use nalgebra::{Rotation3, Vector3};
 
-    /// Steps measured.
-    const STEPS: u32 = 2000;
+    /// Steps measured: 2000, or `HAMFLIGHT_BENCH_STEPS` at build time (the instruction trace of
+    /// `tools/trace-profile.py` runs a shorter bench).
+    const STEPS: u32 = match option_env!("HAMFLIGHT_BENCH_STEPS") {
+        Some(s) => parse_u32(s),
+        None => 2000,
+    };
+
+    /// A decimal number at compile time (a malformed one fails the build).
+    const fn parse_u32(s: &str) -> u32 {
+        let b = s.as_bytes();
+        let mut n: u32 = 0;
+        let mut i = 0;
+        while i < b.len() {
+            assert!(b[i].is_ascii_digit(), "HAMFLIGHT_BENCH_STEPS: not a number");
+            n = n * 10 + (b[i] - b'0') as u32;
+            i += 1;
+        }
+        assert!(n > 0, "HAMFLIGHT_BENCH_STEPS: at least 1");
+        n
+    }
 
     fn input(k: u32) -> Input {
         let t = k as f32 * DT_S;

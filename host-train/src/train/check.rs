@@ -1,40 +1,66 @@
-//! The flight check before a blob is written (issue 10 item 4): every blob the trainer writes
-//! must fly the adaptive controller without crashing.
+//! The flight check before a blob is written: every blob the trainer writes must fly both
+//! adaptation laws without crashing.
 //!
-//! The new model flies, adaptive and without adaptation, a short spiral under a constant wind
-//! in the SITL, on the vehicle its dataset describes: the manifest's mass (the model's), and its
-//! inertia, rotor efficiencies and motor lag when known (else the CF2X's). The blob passes if
-//! neither flight crashes and adaptive is not worse than without adaptation (within
-//! [`ADAPTIVE_MARGIN`]). Otherwise `train` writes nothing and says why; `--no-flight-check`
-//! skips the check. The core's normalized gradient law already makes the adaptation's rates hold
-//! for any scale of learned features; this check is the end-to-end guard on top of it.
+//! The new model flies, on the vehicle its dataset describes (the manifest's mass, the model's,
+//! and its inertia, rotor efficiencies and motor lag when known, else the CF2X's), two short
+//! scenarios in the SITL: a spiral under a constant wind, and the same spiral with one rotor
+//! losing 30 % of its thrust mid-flight. On each it flies without adaptation, with the paper's
+//! gradient law and with the composite law. The blob passes if no flight crashes and neither
+//! law tracks worse than without adaptation (within [`ADAPTIVE_MARGIN`]). Otherwise `train`
+//! writes nothing and says which law failed on which scenario; `--no-flight-check` skips the
+//! check. The core's normalized gradient law already makes the adaptation's rates hold for any
+//! scale of learned features; this check is the end-to-end guard on top of it.
 
 use crate::dataset::VehicleDescription;
 use crate::eval::{self, Report};
-use crate::flight::CoreController;
+use crate::flight::{gains_for, CoreController};
 use crate::scenario::Scenario;
 use anyhow::{bail, Result};
-use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights};
-use hamflight::Gains;
+use hamflight::model::{LearnedModel, ModelWeights};
+use hamflight::{AdaptationLaw, Gains};
 use serde::Serialize;
 
 /// Adaptive may be this much worse than no adaptation (m of RMSE) before the check fails: the
 /// two are equal to noise when the model already explains the wind.
 pub const ADAPTIVE_MARGIN: f64 = 0.005;
 
+/// The check's scenarios: (name, what is added to the windy spiral).
+pub const CHECK_SCENARIOS: [(&str, &str); 2] = [
+    ("windy spiral", ""),
+    (
+        "rotor loss",
+        "rotor_efficiency = [1.0, 1.0, 1.0, 0.7]\nonset_s = 3.0\n",
+    ),
+];
+
+/// One flight of the check.
+#[derive(Clone, Debug, Serialize)]
+pub struct CheckFlight {
+    /// The check scenario's name ([`CHECK_SCENARIOS`]).
+    pub scenario: String,
+    /// `none` (adaptation off), `gradient` or `composite`.
+    pub law: String,
+    /// RMSE over t ≥ 5 s (m), or `None` if it crashed before.
+    pub rmse_m: Option<f64>,
+    /// Crash time (s), if any.
+    pub crash_s: Option<f64>,
+}
+
 /// What the check flew and found; saved in the training report.
 #[derive(Clone, Debug, Serialize)]
 pub struct FlightCheck {
-    /// The check scenario's description.
+    /// The check scenarios' description.
     pub scenario: String,
-    /// Adaptive: RMSE over t ≥ 5 s (m), or `None` if it crashed before.
+    /// The gradient law on the windy spiral: RMSE over t ≥ 5 s (m), or `None` if it crashed.
     pub adaptive_rmse_m: Option<f64>,
-    /// Adaptive: crash time (s), if any.
+    /// The gradient law on the windy spiral: crash time (s), if any.
     pub adaptive_crash_s: Option<f64>,
-    /// Without adaptation: RMSE over t ≥ 5 s (m).
+    /// Without adaptation on the windy spiral: RMSE over t ≥ 5 s (m).
     pub learned_rmse_m: Option<f64>,
-    /// Without adaptation: crash time (s), if any.
+    /// Without adaptation on the windy spiral: crash time (s), if any.
     pub learned_crash_s: Option<f64>,
+    /// Every flight: each scenario without adaptation and under both laws.
+    pub flights: Vec<CheckFlight>,
     /// Why it failed, or `None` if it passed.
     pub failure: Option<String>,
 }
@@ -43,6 +69,13 @@ impl FlightCheck {
     /// True if the blob may be written.
     pub fn passed(&self) -> bool {
         self.failure.is_none()
+    }
+
+    /// The flight of `law` on `scenario`.
+    pub fn flight(&self, scenario: &str, law: &str) -> Option<&CheckFlight> {
+        self.flights
+            .iter()
+            .find(|f| f.scenario == scenario && f.law == law)
     }
 }
 
@@ -70,51 +103,154 @@ pub fn scenario_toml(mass_kg: f64, vehicle: &VehicleDescription) -> String {
     s
 }
 
-/// Flies `weights` adaptive and without adaptation on the check scenario, on a vehicle of
-/// `mass_kg` (the dataset's, which `--mass-kg` may have overridden for the model) that `vehicle`
-/// describes.
+/// The check scenario `extra` adds to (a [`CHECK_SCENARIOS`] entry), on the vehicle of mass
+/// `mass_kg` that `vehicle` describes.
 ///
 /// # Errors
-/// Only if the check scenario does not build (a vehicle description the plant refuses).
+/// The scenario does not build (a vehicle description the plant refuses).
+fn check_scenario(mass_kg: f64, vehicle: &VehicleDescription, extra: &str) -> Result<Scenario> {
+    let toml = scenario_toml(mass_kg, vehicle);
+    // The fault goes into the `[disturbance]` table in place of its onset at t = 0.
+    let toml = if extra.is_empty() {
+        toml
+    } else {
+        toml.replacen("onset_s = 0.0\n", extra, 1)
+    };
+    Scenario::from_toml_str(&toml, "the trainer's flight check", "flight-check")
+}
+
+/// The first failure among `flights` (in [`CHECK_SCENARIOS`] order, the laws in order), named
+/// by law and scenario.
+fn first_failure(flights: &[CheckFlight]) -> Option<String> {
+    let cm = |m: f64| format!("{:.2} cm", 100.0 * m);
+    for (k, (name, _)) in CHECK_SCENARIOS.into_iter().enumerate() {
+        let of = |law: &str| flights.iter().find(|f| f.scenario == name && f.law == law);
+        let laws = [
+            ("gradient", of("gradient")?),
+            ("composite", of("composite")?),
+        ];
+        for (law, f) in laws {
+            if let Some(t) = f.crash_s {
+                return Some(format!(
+                    "adaptive ({law} law) crashed at {t:.2} s on the {name}"
+                ));
+            }
+        }
+        let none = of("none")?;
+        // Without adaptation a rotor loss may bring the vehicle down: that is what the laws are
+        // for, so only the windy spiral requires the model itself to fly.
+        let baseline = match none.crash_s {
+            Some(t) if k == 0 => {
+                return Some(format!(
+                    "the model without adaptation crashed at {t:.2} s on the {name}"
+                ))
+            }
+            Some(_) => Some(f64::INFINITY),
+            None => none.rmse_m,
+        };
+        for (law, f) in laws {
+            match (f.rmse_m, baseline) {
+                (Some(ra), Some(rl)) if ra > rl + ADAPTIVE_MARGIN => {
+                    return Some(format!(
+                        "adaptive ({law} law) tracks worse than without adaptation on the {name} \
+                         ({} against {})",
+                        cm(ra),
+                        cm(rl)
+                    ))
+                }
+                (Some(_), Some(_)) => {}
+                _ => {
+                    return Some(format!(
+                        "no RMSE over t ≥ 5 s on the {name} (the flight ended early)"
+                    ))
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Flies `weights` on the check scenarios ([`CHECK_SCENARIOS`]), without adaptation and under
+/// both laws, with the gains of the vehicle the blob describes, on a vehicle of `mass_kg` (the
+/// dataset's, which `--mass-kg` may have overridden for the model) that `vehicle` describes.
+///
+/// # Errors
+/// Only if a check scenario does not build (a vehicle description the plant refuses).
 pub fn run(
     weights: &ModelWeights,
     mass_kg: f64,
     vehicle: &VehicleDescription,
 ) -> Result<FlightCheck> {
-    let model = LearnedModel::new(*weights);
-    let sc = Scenario::from_toml_str(
-        &scenario_toml(mass_kg, vehicle),
-        "the trainer's flight check",
-        "flight-check",
-    )?;
-    let fly = |adapt: bool| -> Report {
-        let gains = Gains {
-            adapt,
-            ..Gains::for_mass_kg(model.mass_kg())
-        };
-        let mut c = CoreController::new("check", model, gains);
-        Report::from_log(&eval::fly(&sc, &mut c), None)
+    run_model(&LearnedModel::new(*weights), mass_kg, vehicle)
+}
+
+/// [`run`] for a whole model (its networks and its motor lag).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_model(
+    model: &LearnedModel,
+    mass_kg: f64,
+    vehicle: &VehicleDescription,
+) -> Result<FlightCheck> {
+    let model = *model;
+    let base = gains_for(&model);
+    let mut flights = Vec::new();
+    let mut description = String::new();
+    for (name, extra) in CHECK_SCENARIOS {
+        let sc = check_scenario(mass_kg, vehicle, extra)?;
+        if description.is_empty() {
+            description = sc.spec.description.clone().unwrap_or_default();
+        }
+        let laws: [(&str, Gains); 3] = [
+            (
+                "none",
+                Gains {
+                    adapt: false,
+                    ..base
+                },
+            ),
+            (
+                "gradient",
+                Gains {
+                    law: AdaptationLaw::Gradient,
+                    ..base
+                },
+            ),
+            (
+                "composite",
+                Gains {
+                    law: AdaptationLaw::Composite,
+                    ..base
+                },
+            ),
+        ];
+        for (law, gains) in laws {
+            let mut c = CoreController::new("check", model, gains);
+            let r = Report::from_log(&eval::fly(&sc, &mut c), None);
+            flights.push(CheckFlight {
+                scenario: name.to_string(),
+                law: law.to_string(),
+                rmse_m: r.rmse_pos_window_m,
+                crash_s: r.crash_time_s,
+            });
+        }
+    }
+    let failure = first_failure(&flights);
+    let of = |law: &str| {
+        flights
+            .iter()
+            .find(|f| f.scenario == CHECK_SCENARIOS[0].0 && f.law == law)
+            .cloned()
     };
-    let (a, l) = (fly(true), fly(false));
-    let failure = match (a.crash_time_s, l.crash_time_s) {
-        (Some(t), _) => Some(format!("adaptive crashed at {t:.2} s")),
-        (None, Some(t)) => Some(format!("the model without adaptation crashed at {t:.2} s")),
-        (None, None) => match (a.rmse_pos_window_m, l.rmse_pos_window_m) {
-            (Some(ra), Some(rl)) if ra > rl + ADAPTIVE_MARGIN => Some(format!(
-                "adaptive tracks worse than without adaptation ({:.2} cm against {:.2} cm)",
-                100.0 * ra,
-                100.0 * rl
-            )),
-            (Some(_), Some(_)) => None,
-            _ => Some("no RMSE over t ≥ 5 s (the flight ended early)".into()),
-        },
-    };
+    let (a, l) = (of("gradient"), of("none"));
     Ok(FlightCheck {
-        scenario: sc.spec.description.clone().unwrap_or_default(),
-        adaptive_rmse_m: a.rmse_pos_window_m,
-        adaptive_crash_s: a.crash_time_s,
-        learned_rmse_m: l.rmse_pos_window_m,
-        learned_crash_s: l.crash_time_s,
+        scenario: format!("{description}; and with rotor 4 at 70 % from t = 3 s"),
+        adaptive_rmse_m: a.as_ref().and_then(|f| f.rmse_m),
+        adaptive_crash_s: a.as_ref().and_then(|f| f.crash_s),
+        learned_rmse_m: l.as_ref().and_then(|f| f.rmse_m),
+        learned_crash_s: l.as_ref().and_then(|f| f.crash_s),
+        flights,
         failure,
     })
 }
@@ -124,11 +260,11 @@ pub fn run(
 /// # Errors
 /// The check failed, or could not run.
 pub fn require(
-    weights: &ModelWeights,
+    model: &LearnedModel,
     mass_kg: f64,
     vehicle: &VehicleDescription,
 ) -> Result<FlightCheck> {
-    let c = run(weights, mass_kg, vehicle)?;
+    let c = run_model(model, mass_kg, vehicle)?;
     if let Some(why) = &c.failure {
         bail!(
             "flight check failed: {why} (SITL, {}, on the dataset's vehicle). Nothing was \

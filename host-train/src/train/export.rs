@@ -12,8 +12,8 @@ use super::TrainConfig;
 use anyhow::Result;
 use hamflight::lie;
 use hamflight::model::{
-    rk4_step, true_input_gain, HamiltonianModel, LearnedModel, ModelWeights, NominalModel, State,
-    FEATURES, GRAVITY_M_S2,
+    rk4_step, true_input_gain, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES,
+    GRAVITY_M_S2,
 };
 use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
@@ -107,6 +107,9 @@ pub struct TrainReport {
     pub true_mass_kg: f32,
     /// The manifest's motor time constant (s): the commands were realized through it at import.
     pub motor_tau_s: Option<f64>,
+    /// The motor time constant written into the blob (s): what the composite law's prediction
+    /// assumes (`--motor-tau-s`, else the manifest's, else 0.05 s).
+    pub blob_motor_tau_s: f32,
     /// The SITL flight check before writing ([`super::check`]); null when skipped.
     pub flight_check: Option<super::check::FlightCheck>,
     /// Learned J at hover (R = I), kg·m², row-major.
@@ -348,6 +351,7 @@ pub fn report(
         mass_kg: model_mass,
         true_mass_kg: true_mass,
         motor_tau_s: data.vehicle.motor_tau_s,
+        blob_motor_tau_s: hamflight::model::DEFAULT_MOTOR_TAU_S,
         flight_check: None,
         learned_inertia_hover_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| j[(r, c)])),
         true_inertia_kg_m2: true_j
@@ -386,8 +390,8 @@ fn calm_errors(
 ///
 /// # Errors
 /// Any I/O failure.
-pub fn write(out: &Path, weights: &ModelWeights, report: &TrainReport) -> Result<()> {
-    write_atomic(out, &hamflight::blob::encode(weights))?;
+pub fn write(out: &Path, model: &LearnedModel, report: &TrainReport) -> Result<()> {
+    write_atomic(out, &hamflight::blob::encode_model(model))?;
     let mut json_path = out.as_os_str().to_owned();
     json_path.push(".json");
     let json = serde_json::to_vec_pretty(report)?;

@@ -236,6 +236,18 @@ pub const ROTOR_GAINS: usize = 4;
 
 /// Index in [`TModel::tensors`] of the W head's input-layer weight (J⁻¹ and g heads take 6 each).
 const FEATURE_INPUT_WEIGHT: usize = 12;
+/// `w` with g's body x and y force rows set to zero (the g head's output weights and biases of
+/// those rows), exactly zero at every attitude: no input of a quadrotor makes a body x or y
+/// force ([`TrainConfig::zero_unactuated_gain_rows`]).
+pub fn with_unactuated_gain_rows_zeroed(w: &ModelWeights) -> ModelWeights {
+    let mut out = *w;
+    let l2 = &mut out.gain.l2;
+    for (row, bias) in l2.weight.iter_mut().zip(l2.bias.iter_mut()).take(8) {
+        row.iter_mut().for_each(|v| *v = 0.0);
+        *bias = 0.0;
+    }
+    out
+}
 
 /// The learning rate of main-stage epoch `epoch` (1-based) of `epochs`: a linear warm-up over
 /// `warmup` epochs to `lr`, then a cosine decay to lr / 20 at the last epoch.

@@ -1,0 +1,131 @@
+"""hamflight: the learned, physics-guided adaptive flight controller for Crazyflie-class
+quadrotors, in-process for numpy.
+
+Everything here runs the same compiled f32 Rust code as the firmware and ``host-train bridge``:
+
+- :class:`Controller`: one controller (learned model from a weight blob, or the nominal model),
+  ``step(p, R, v_body, w_body, setpoint, dt, acc=None)`` -> :class:`StepResult`;
+- :class:`ControllerBatch`: N controllers stepped by one call on (N, ...) arrays;
+- :class:`Setpoint`: desired position and derivatives (world frame) and yaw;
+- :class:`Blob`: the checked weight-blob codec; a rejected blob raises :class:`BlobError`;
+- :mod:`hamflight.sitl`: the SITL plant and scenario files, flights as numpy arrays;
+- :func:`collect`, :func:`import_logs`, :func:`train`: the data and training commands.
+
+Units are SI and named: positions m (world), R body->world (row-major numpy 3x3), velocities in
+the body frame (m/s, rad/s), accelerometer specific force m/s^2 (body, +9.8 along z at hover),
+dt s. Inputs may be float64 or float32 arrays (or sequences of numbers); they are cast to f32 as
+the bridge casts them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Callable, Iterable, Optional, Sequence, Union
+
+from . import _core
+from ._core import (  # noqa: F401
+    BLOB_CRC_LEN,
+    BLOB_HEADER_LEN,
+    CONTROLLER_NAMES,
+    GAIN_KEYWORDS,
+    BatchResult,
+    Blob,
+    BlobError,
+    Controller,
+    ControllerBatch,
+    Faults,
+    Setpoint,
+    StepResult,
+)
+from . import sitl  # noqa: F401
+
+__version__: str = _core.__version__
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+__all__ = [
+    "Controller",
+    "ControllerBatch",
+    "Setpoint",
+    "StepResult",
+    "BatchResult",
+    "Faults",
+    "Blob",
+    "BlobError",
+    "CONTROLLER_NAMES",
+    "GAIN_KEYWORDS",
+    "sitl",
+    "collect",
+    "import_logs",
+    "train",
+    "__version__",
+]
+
+
+def _argv(config: dict) -> list:
+    """Keyword arguments to the CLI's flags: ``epochs=3`` -> ``--epochs 3``; ``True`` -> the
+    bare flag (``no_flight_check=True`` -> ``--no-flight-check``); ``False``/``None`` -> left
+    out; lists and tuples -> comma-separated."""
+    out = []
+    for key, value in config.items():
+        flag = "--" + key.replace("_", "-")
+        if value is None or value is False:
+            continue
+        if value is True:
+            out.append(flag)
+        elif isinstance(value, (list, tuple)):
+            out += [flag, ",".join(str(v) for v in value)]
+        else:
+            out += [flag, str(value)]
+    return out
+
+
+def _run(command: str, argv: list, progress: Optional[Callable[[str], None]]) -> Any:
+    if progress is not None:
+        progress(f"{command}: started")
+    result = json.loads(_core.run_tool(command, [str(a) for a in argv]))
+    if progress is not None:
+        progress(f"{command}: done")
+    return result
+
+
+def collect(out: PathLike, *, progress: Optional[Callable[[str], None]] = None, **config: Any) -> dict:
+    """Collect the paper's training dataset with the SITL (``host-train collect``) into ``out``.
+
+    ``config`` takes the command's flags as keywords (``realizations=2, windows=100,
+    seed=1``; see ``host-train collect --help``). Returns the dataset's manifest as a dict. The
+    dataset is CSV (``pandas.read_csv(f).groupby("flight")``)."""
+    return _run("collect", ["--out", os.fspath(out)] + _argv(config), progress)
+
+
+def import_logs(
+    out: PathLike,
+    logs: Iterable[PathLike],
+    *,
+    calm: Sequence[PathLike] = (),
+    progress: Optional[Callable[[str], None]] = None,
+    **config: Any,
+) -> list:
+    """Import flight logs (Bitcraze uSD-card deck binary logs or the documented CSV) into a
+    dataset (``host-train import``): one realization per log, airborne flights only; ``calm``
+    marks disturbance-free flights. ``config``: the command's flags as keywords (``mass_kg=0.034,
+    motor_tau_s=0.02``). Returns one summary dict per log."""
+    argv = ["--out", os.fspath(out)] + [os.fspath(p) for p in logs]
+    for c in calm:
+        argv += ["--calm", os.fspath(c)]
+    return _run("import", argv + _argv(config), progress)
+
+
+def train(
+    data_dir: PathLike,
+    out: PathLike,
+    *,
+    progress: Optional[Callable[[str], None]] = None,
+    **config: Any,
+) -> dict:
+    """Train the Hamiltonian model on a dataset and write the blob ``out`` and ``out.json``
+    (``host-train train``). ``config``: the command's flags as keywords (``epochs=5, lr=3e-3,
+    no_flight_check=True, quiet=True``). Returns the training report as a dict; load the blob
+    with :meth:`Blob.load`."""
+    return _run("train", ["--data", os.fspath(data_dir), "--out", os.fspath(out)] + _argv(config), progress)

@@ -1,0 +1,18 @@
+"""The SITL quadrotor of ``host-train`` (CF2X constants, wind, rotor faults, motor lag, noise)
+and its TOML scenario files, from Python.
+
+>>> from hamflight import sitl
+>>> log = sitl.fly("scenarios/paper-spiral.toml", "adaptive")
+>>> log.rmse_m, log.p_m.shape          # RMSE over t >= 5 s (m), (ticks, 3) positions
+
+``fly`` takes a scenario (a :class:`Scenario` or a path) and a controller: a name
+(:func:`controllers` lists them; the learned ones fly the shipped blob unless ``weights`` is
+given) or a :class:`hamflight.Controller` (a fresh copy of it flies). To vary a scenario, edit
+its dict: ``Scenario.from_dict({**s.to_dict(), "seed": 3})``.
+"""
+
+from __future__ import annotations
+
+from ._core import FlightResult, Scenario, controllers, fly
+
+__all__ = ["Scenario", "FlightResult", "fly", "controllers"]

@@ -1,0 +1,35 @@
+//! `hamflight._core`: the native module of the `hamflight` Python package. It wraps the very f32
+//! core the firmware runs (`hamflight`), and the host crate (`host-train`) for the SITL plant,
+//! the scenario files and the data and training commands. The Python-facing documentation is in
+//! `hamflight/__init__.py`, `hamflight/_core.pyi` and `docs/python.md`.
+
+mod arrays;
+mod blob;
+mod controller;
+mod sitl;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<controller::Controller>()?;
+    m.add_class::<controller::ControllerBatch>()?;
+    m.add_class::<controller::Setpoint>()?;
+    m.add_class::<controller::StepResult>()?;
+    m.add_class::<controller::BatchResult>()?;
+    m.add_class::<controller::Faults>()?;
+    m.add_class::<blob::Blob>()?;
+    m.add("BlobError", py.get_type::<blob::BlobError>())?;
+    m.add("CONTROLLER_NAMES", controller::CORE_NAMES.to_vec())?;
+    m.add("GAIN_KEYWORDS", controller::GAIN_KEYS.to_vec())?;
+    m.add("BLOB_HEADER_LEN", blob::LAYOUT.0)?;
+    m.add("BLOB_CRC_LEN", blob::LAYOUT.1)?;
+    m.add_class::<sitl::Scenario>()?;
+    m.add_class::<sitl::FlightResult>()?;
+    m.add_function(wrap_pyfunction!(sitl::fly, m)?)?;
+    m.add_function(wrap_pyfunction!(sitl::controllers, m)?)?;
+    m.add_function(wrap_pyfunction!(sitl::run_tool, m)?)?;
+    Ok(())
+}

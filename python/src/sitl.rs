@@ -1,0 +1,291 @@
+//! `hamflight.sitl`: the host crate's SITL plant and scenario files, and its data and training
+//! commands.
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use host_train::controller::Controller as HostController;
+use host_train::eval::{self, FlightLog, Report};
+use host_train::flight::{self, CoreController};
+use host_train::scenario::{Scenario as HostScenario, ScenarioSpec};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::controller::{named, AnyModel, Controller, CORE_NAMES};
+
+fn err(e: anyhow::Error) -> PyErr {
+    PyValueError::new_err(format!("{e:#}"))
+}
+
+fn json_loads<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'py, PyAny>> {
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
+    obj.py()
+        .import("json")?
+        .call_method1("dumps", (obj,))?
+        .extract()
+}
+
+/// A validated scenario (the TOML files of `scenarios/`).
+#[pyclass(module = "hamflight._core", frozen, skip_from_py_object)]
+#[derive(Clone)]
+pub struct Scenario {
+    pub s: HostScenario,
+}
+
+#[pymethods]
+impl Scenario {
+    /// Reads and validates a scenario file.
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        Ok(Self {
+            s: HostScenario::load(&path).map_err(err)?,
+        })
+    }
+
+    /// Parses scenario TOML text.
+    #[staticmethod]
+    #[pyo3(signature = (text, name="scenario"))]
+    fn from_toml(text: &str, name: &str) -> PyResult<Self> {
+        Ok(Self {
+            s: HostScenario::from_toml_str(text, name, name).map_err(err)?,
+        })
+    }
+
+    /// A scenario from a dict with the file's keys (as `to_dict` gives them).
+    #[staticmethod]
+    #[pyo3(signature = (spec, name=None))]
+    fn from_dict(spec: &Bound<'_, PyAny>, name: Option<&str>) -> PyResult<Self> {
+        let text = json_dumps(spec)?;
+        let spec: ScenarioSpec = serde_json::from_str(&text)
+            .map_err(|e| PyValueError::new_err(format!("bad scenario: {e}")))?;
+        let name = name
+            .map(str::to_owned)
+            .or_else(|| spec.name.clone())
+            .unwrap_or_else(|| "scenario".into());
+        Ok(Self {
+            s: HostScenario::from_spec(&name, spec).map_err(err)?,
+        })
+    }
+
+    /// The scenario's keys as a dict (every default filled in); edit and pass to from_dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let text = serde_json::to_string(&self.s.spec)
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        json_loads(py, &text)
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        &self.s.name
+    }
+    #[getter]
+    fn duration_s(&self) -> f64 {
+        self.s.spec.duration_s
+    }
+    #[getter]
+    fn control_hz(&self) -> f64 {
+        self.s.spec.control_hz
+    }
+
+    /// The reference at time t: dict of p_m, v_m_s, a_m_s2, j_m_s3 (world) and yaw_rad,
+    /// yaw_rate_rad_s.
+    fn reference<'py>(&self, py: Python<'py>, t_s: f64) -> PyResult<Bound<'py, PyDict>> {
+        let r = self.s.reference(t_s);
+        let d = PyDict::new(py);
+        d.set_item("p_m", PyArray1::from_slice(py, r.p_m.as_slice()))?;
+        d.set_item("v_m_s", PyArray1::from_slice(py, r.v_m_s.as_slice()))?;
+        d.set_item("a_m_s2", PyArray1::from_slice(py, r.a_m_s2.as_slice()))?;
+        d.set_item("j_m_s3", PyArray1::from_slice(py, r.j_m_s3.as_slice()))?;
+        d.set_item("yaw_rad", r.yaw_rad)?;
+        d.set_item("yaw_rate_rad_s", r.yaw_rate_rad_s)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scenario(name={:?}, duration_s={}, control_hz={})",
+            self.s.name, self.s.spec.duration_s, self.s.spec.control_hz
+        )
+    }
+}
+
+fn scenario_arg(obj: &Bound<'_, PyAny>) -> PyResult<HostScenario> {
+    if let Ok(s) = obj.cast::<Scenario>() {
+        return Ok(s.get().s.clone());
+    }
+    let path: PathBuf = obj.extract().map_err(|_| {
+        PyTypeError::new_err("scenario: expected a hamflight.sitl.Scenario or a path")
+    })?;
+    HostScenario::load(&path).map_err(err)
+}
+
+/// What to fly: a name of the registry, or a copy of a Python controller.
+enum Pilot {
+    Baseline(String),
+    Core(String, AnyModel, hamflight::Gains),
+}
+
+/// One flight, without the GIL.
+fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> {
+    let mut ctrl: Box<dyn HostController> = match pilot {
+        Pilot::Baseline(name) => host_train::baselines::by_name(name, scenario)?,
+        Pilot::Core(name, model, gains) => {
+            Box::new(CoreController::new(name, model.clone(), *gains))
+        }
+    };
+    Ok(eval::fly(scenario, ctrl.as_mut()))
+}
+
+/// A flown flight: the log as numpy arrays and the scores of `report.json`.
+#[pyclass(module = "hamflight._core", frozen)]
+pub struct FlightResult {
+    /// Tick times (s), (n,).
+    #[pyo3(get)]
+    t_s: Py<PyArray1<f64>>,
+    /// Flown (true) position (m, world), (n, 3).
+    #[pyo3(get)]
+    p_m: Py<PyArray2<f64>>,
+    /// Desired position (m, world), (n, 3).
+    #[pyo3(get)]
+    p_ref_m: Py<PyArray2<f64>>,
+    /// |p − p*| (m), (n,).
+    #[pyo3(get)]
+    err_m: Py<PyArray1<f64>>,
+    /// Rotor commands (rpm), (n, 4).
+    #[pyo3(get)]
+    rpm: Py<PyArray2<f64>>,
+    /// The adaptation estimate a, (n, 6); (n, 0) for a controller that does not adapt.
+    #[pyo3(get)]
+    adaptation: Py<PyArray2<f64>>,
+    /// The scores (the keys of `host-train eval`'s report.json).
+    #[pyo3(get)]
+    report: Py<PyAny>,
+}
+
+#[pymethods]
+impl FlightResult {
+    /// Position RMSE over t ≥ 5 s (m), None if the flight ended before.
+    #[getter]
+    fn rmse_m(&self, py: Python<'_>) -> PyResult<Option<f64>> {
+        self.report
+            .bind(py)
+            .get_item("rmse_pos_window_m")?
+            .extract()
+    }
+    #[getter]
+    fn crashed(&self, py: Python<'_>) -> PyResult<bool> {
+        self.report.bind(py).get_item("crashed")?.extract()
+    }
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!(
+            "FlightResult(ticks={}, rmse_m={:?}, crashed={:?})",
+            numpy::PyUntypedArrayMethods::len(self.t_s.bind(py).as_untyped()),
+            self.rmse_m(py).ok().flatten(),
+            self.crashed(py).ok()
+        )
+    }
+}
+
+fn rows<const K: usize>(py: Python<'_>, v: &[[f64; K]]) -> PyResult<Py<PyArray2<f64>>> {
+    let flat: Vec<f64> = v.iter().flatten().copied().collect();
+    Ok(PyArray1::from_vec(py, flat).reshape([v.len(), K])?.unbind())
+}
+
+fn result(py: Python<'_>, log: &FlightLog, scenario: &HostScenario) -> PyResult<FlightResult> {
+    let report = Report::from_flight(log, scenario, scenario.path.as_deref());
+    let text =
+        serde_json::to_string(&report).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let k = log.adaptation.iter().map(Vec::len).max().unwrap_or(0);
+    let mut adapt = Vec::with_capacity(k * log.adaptation.len());
+    for a in &log.adaptation {
+        adapt.extend((0..k).map(|j| a.get(j).copied().unwrap_or(f64::NAN)));
+    }
+    Ok(FlightResult {
+        t_s: PyArray1::from_slice(py, &log.t_s).unbind(),
+        p_m: rows(py, &log.p_m)?,
+        p_ref_m: rows(py, &log.p_ref_m)?,
+        err_m: PyArray1::from_slice(py, &log.err_m).unbind(),
+        rpm: rows(py, &log.rpm)?,
+        adaptation: PyArray1::from_vec(py, adapt)
+            .reshape([log.adaptation.len(), k])?
+            .unbind(),
+        report: json_loads(py, &text)?.unbind(),
+    })
+}
+
+/// Flies `scenario` (a Scenario or a path) with `controller`: a name (the core's, `pid`,
+/// `geometric`) or a hamflight.Controller (a copy flies; its estimate starts from zero). The
+/// GIL is released during the flight.
+#[pyfunction]
+#[pyo3(signature = (scenario, controller=None, weights=None))]
+pub fn fly(
+    py: Python<'_>,
+    scenario: &Bound<'_, PyAny>,
+    controller: Option<&Bound<'_, PyAny>>,
+    weights: Option<&Bound<'_, PyAny>>,
+) -> PyResult<FlightResult> {
+    let sc = scenario_arg(scenario)?;
+    let default = pyo3::types::PyString::new(py, "adaptive").into_any();
+    let controller = controller.unwrap_or(&default);
+    let pilot = if let Ok(c) = controller.cast::<Controller>() {
+        let c = c.borrow();
+        Pilot::Core(c.name.clone(), c.inner.model().clone(), c.inner.gains)
+    } else {
+        let name: String = controller.extract().map_err(|_| {
+            PyTypeError::new_err("controller: expected a name or a hamflight.Controller")
+        })?;
+        if CORE_NAMES.contains(&name.as_str()) {
+            let (model, gains) = named(&name, weights)?;
+            Pilot::Core(name, model, gains)
+        } else {
+            Pilot::Baseline(name)
+        }
+    };
+    let log = py.detach(|| fly_one(&sc, &pilot)).map_err(err)?;
+    result(py, &log, &sc)
+}
+
+/// The registry's names, with a line each.
+#[pyfunction]
+pub fn controllers() -> Vec<(String, String)> {
+    let mut v: Vec<(String, String)> = flight::CORE_CONTROLLERS
+        .iter()
+        .map(|(n, d)| (n.to_string(), d.to_string()))
+        .collect();
+    v.push(("pid".into(), "the DSL PID of gym-pybullet-drones".into()));
+    v.push((
+        "geometric".into(),
+        "Lee et al. on the true constants".into(),
+    ));
+    v
+}
+
+#[derive(Parser)]
+#[command(name = "host-train")]
+enum Tool {
+    Collect(host_train::collect::CollectArgs),
+    Import(host_train::import::ImportArgs),
+    Train(host_train::train::TrainArgs),
+}
+
+/// Runs `host-train collect|import|train` with `argv` (the flags after the command); returns
+/// the command's summary as JSON text. The GIL is released while it runs.
+#[pyfunction]
+pub fn run_tool(py: Python<'_>, command: &str, argv: Vec<String>) -> PyResult<String> {
+    let mut full = vec!["host-train".to_string(), command.to_string()];
+    full.extend(argv);
+    let tool = Tool::try_parse_from(&full).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    py.detach(|| -> anyhow::Result<String> {
+        Ok(match tool {
+            Tool::Collect(a) => serde_json::to_string(&host_train::collect::run(&a)?)?,
+            Tool::Import(a) => serde_json::to_string(&host_train::import::run(&a)?)?,
+            Tool::Train(a) => serde_json::to_string(&host_train::train::run_cli(&a)?)?,
+        })
+    })
+    .map_err(err)
+}
