@@ -123,6 +123,24 @@ fn le_u32(b: &[u8]) -> Option<u32> {
 ///
 /// # Errors
 /// As [`decode_into`].
+///
+/// # Examples
+///
+/// ```
+/// use hamflight::blob::{self, BlobError};
+///
+/// let bytes = include_bytes!("../weights/default.hfw");
+/// let weights = blob::decode(bytes)?;
+/// assert!((weights.mass_kg - 0.027).abs() < 1e-6);
+///
+/// // Every check fails loudly: one flipped byte in the body breaks the checksum.
+/// let mut bad = bytes.to_vec();
+/// let last = bad.len() - 1;
+/// bad[last] ^= 0x40;
+/// assert!(blob::decode(&bad).is_err());
+/// assert_eq!(blob::decode(&bytes[..4]), Err(BlobError::Truncated));
+/// # Ok::<(), BlobError>(())
+/// ```
 pub fn decode(bytes: &[u8]) -> Result<ModelWeights, BlobError> {
     let mut weights = ModelWeights::ZERO;
     decode_into(bytes, &mut weights)?;

@@ -444,6 +444,33 @@ impl<M: HamiltonianModel> FlightController<M> {
 
     /// One control tick of length `dt_s` (s) without extra measurements:
     /// [`FlightController::step_measured`] with [`Measurement::default`].
+    ///
+    /// # Examples
+    ///
+    /// Hold a hover on the shipped weights; a non-finite state turns the motors off:
+    ///
+    /// ```
+    /// use hamflight::model::LearnedModel;
+    /// use hamflight::{FlightController, Gains, RotorCommand, Setpoint, State, VehicleFacts};
+    /// use nalgebra::Vector3;
+    ///
+    /// let model = LearnedModel::from_blob(include_bytes!("../weights/default.hfw"))?;
+    /// let gains = Gains::for_vehicle(&VehicleFacts::of(&model));
+    /// let mut fc = FlightController::new(model, gains);
+    /// let hold = Setpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0);
+    /// let at_hold = State { p_m: hold.p_m, ..State::default() };
+    ///
+    /// let out = fc.step(&at_hold, &hold, 0.002);
+    /// assert!(!out.faults.is_fault());
+    /// let thrust_n: f32 = out.rotors.thrust_n.iter().sum();
+    /// assert!((thrust_n - 0.027 * 9.81).abs() < 0.05, "about m g at hover: {thrust_n}");
+    ///
+    /// let bad = State { p_m: Vector3::new(f32::NAN, 0.0, 1.0), ..at_hold };
+    /// let out = fc.step(&bad, &hold, 0.002);
+    /// assert!(out.faults.is_fault());
+    /// assert_eq!(out.rotors, RotorCommand::OFF);
+    /// # Ok::<(), hamflight::blob::BlobError>(())
+    /// ```
     pub fn step(&mut self, state: &State, sp: &Setpoint, dt_s: f32) -> Output {
         self.step_measured(state, sp, &Measurement::default(), dt_s)
     }

@@ -11,7 +11,7 @@
 //! - [`lie`]: SO(3) hat/vee, exp/log, rotation error;
 //! - [`nn`]: const-generic dense layers and MLPs with their input Jacobians;
 //! - [`model`]: the learned Hamiltonian model's networks;
-//! - [`reference`]: setpoints and the desired attitude from differential flatness;
+//! - [`reference`](mod@reference): setpoints and the desired attitude from differential flatness;
 //! - [`control`]: the IDA-PBC tracking law and the [`FlightController`];
 //! - [`adapt`]: the disturbance adaptation laws: the paper's gradient law and the composite
 //!   (prediction-error) law, with the platform's extra [`Measurement`];

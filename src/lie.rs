@@ -122,7 +122,7 @@ pub fn orthonormalize(r: &Matrix3<f32>) -> Option<Matrix3<f32>> {
 
 /// The attitude matrix of the quaternion `q = [w, x, y, z]` (Hamilton convention, scalar first,
 /// body → world like R), in the homogeneous form
-/// R = (w² − |u|²) I + 2 u uᵀ + 2 w [u]×, with u = (x, y, z).
+/// R = (w² − |u|²) I + 2 u uᵀ + 2 w \[u\]×, with u = (x, y, z).
 ///
 /// This is the one place where a quaternion becomes the core's R (the firmware's link carries the
 /// attitude as one). It does not normalize: for |q| = 1 + ε the result is (1 + ε)² times a

@@ -125,14 +125,18 @@ pub struct ImportArgs {
     /// Flight logs, one realization (one a_j) each.
     #[arg(value_name = "LOG")]
     pub logs: Vec<PathBuf>,
-    /// Flight logs flown without disturbance (their a_j is pinned to 0 in training).
-    #[arg(long, value_name = "LOG")]
+    /// Flight logs flown without disturbance (their a_j is pinned to 0 in training). Takes every
+    /// log that follows it up to the next option (`--calm C1 C2`), and may be repeated; give the
+    /// disturbed logs before it.
+    #[arg(long, value_name = "LOG", num_args = 1..)]
     pub calm: Vec<PathBuf>,
     /// Input format.
     #[arg(long, value_enum, default_value_t = LogFormat::Auto)]
     pub format: LogFormat,
-    /// Vehicle mass (kg), written to the manifest and used by the thrust rule.
-    #[arg(long, default_value_t = 0.027)]
+    /// Vehicle mass (kg), written to the manifest and used by the thrust rule. Required: neither
+    /// log format carries it, and a wrong mass scales every force the model learns (the stock
+    /// Crazyflie 2.1 is 0.027).
+    #[arg(long, required = true)]
     pub mass_kg: f64,
     /// Gravity (m/s²).
     #[arg(long, default_value_t = 9.8)]
@@ -536,7 +540,7 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
         .chain(args.calm.iter().map(|p| (p, true)))
         .collect();
     if inputs.is_empty() {
-        bail!("no logs given: host-train import --out DIR LOG... [--calm LOG...]");
+        bail!("no logs given: host-train import --out DIR --mass-kg KG LOG... [--calm LOG...]");
     }
     let positive = |x: f64| x.is_finite() && x > 0.0;
     if !positive(args.mass_kg) || !positive(args.gravity_m_s2) {

@@ -12,8 +12,8 @@
 //!   g_ik = o_ik · [`WRENCH_SCALE`]ᵢ / [`CONTROL_SCALE`]ₖ, so that every output is dimensionless
 //!   and of order one (the true g has o = identity pattern).
 //! - **W head**: inputs the rows of R (see [`super::DIST_IN`] for why not 𝔭); output o (6×p) holds, per
-//!   feature k, a world-frame specific force n_k = o[0..3][k] (m/s² per unit of aₖ) and a body
-//!   torque t_k = o[3..6][k] (units of [`TORQUE_SCALE_NM`]). The feature column is
+//!   feature k, a world-frame specific force n_k = o\[0..3\]\[k\] (m/s² per unit of aₖ) and a body
+//!   torque t_k = o\[3..6\]\[k\] (units of [`TORQUE_SCALE_NM`]). The feature column is
 //!   W[:, k] = [m Rᵀ n_k; TORQUE_SCALE_NM · t_k]: wind, a world-fixed force, is then linear in a
 //!   at every attitude, and so extrapolates to winds larger than in training.
 

@@ -207,8 +207,9 @@ pub struct TrainArgs {
     /// Dataset directory written by `host-train collect` or `host-train import`.
     #[arg(long, value_name = "DIR")]
     pub data: std::path::PathBuf,
-    /// Output weight blob; the report goes to FILE.json next to it.
-    #[arg(long, value_name = "FILE.hfw", default_value = "weights/default.hfw")]
+    /// Output weight blob; the report goes to FILE.json next to it. Required, so that training
+    /// never overwrites the shipped `weights/default.hfw` unless this names it.
+    #[arg(long, value_name = "FILE.hfw")]
     pub out: std::path::PathBuf,
     /// Epochs of the main stage (J⁻¹, g, W, the a_j and the rotor gains), then
     /// `--feature-epochs` of the feature stage.
