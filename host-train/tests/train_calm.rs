@@ -1,4 +1,4 @@
-//! Issue 10, item 7: the shipped weights must not bake the training set's mean disturbance into
+//! Calm-air identifiability (docs/training.md): the shipped weights must not bake the training set's mean disturbance into
 //! g. The default collection ends with a calm, disturbance-free realization (a_j pinned to 0),
 //! which anchors g to the undisturbed vehicle, and training learns a rotor gain per rotor per
 //! flight (the multiplicative twin of a_j), so that each flight's weak rotors scale its own
@@ -47,7 +47,7 @@ fn learned_without_adaptation_holds_calm_air_like_the_nominal_model() {
     assert!(a < 7e-5, "adaptive in calm air: {a:.3e} m");
 }
 
-/// Issue 10's bar: in calm air, `learned` without adaptation within 1.5× of the nominal law, on
+/// The bar: in calm air, `learned` without adaptation within 1.5× of the nominal law, on
 /// the vehicle the nominal model describes exactly, with the state-estimate noise of
 /// paper-spiral-realistic (a real vehicle's estimator is never exact).
 #[test]
