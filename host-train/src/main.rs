@@ -24,7 +24,8 @@ enum Command {
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
-    /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per epoch.
+    /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
+    /// epoch.
     BenchTrain(host_train::train::bench::BenchArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),

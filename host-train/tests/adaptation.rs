@@ -1,7 +1,7 @@
 //! The adaptation laws against disturbances that change and against windup and wrong
-//! features (docs/adaptation.md): the composite law's bars, each next to the paper's gradient law flown on
-//! the same scenario. Thresholds sit near 1.5× the values measured when they were set (in the
-//! comments: `measured`).
+//! features (docs/adaptation.md): the composite law's bars, each next to the paper's gradient law
+//! flown on the same scenario. Thresholds sit near 1.5× the values measured when they were set (in
+//! the comments: `measured`).
 //!
 //! Run in release: `cargo test --release -p host-train --test adaptation`.
 

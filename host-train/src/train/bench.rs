@@ -1,9 +1,10 @@
 //! `host-train bench-train`: seconds per training epoch at several batch sizes, on the sizes of
-//! the PyTorch comparison in docs/performance.md (hidden 16, p = 6, g and W on the attitude, windows of N = 5
-//! states, RK4; 7,776 windows: the paper's 8 × 1080 less the 10 % held out). The windows come
-//! from a fresh `collect` of the paper's 8 disturbed realizations (no calm one) in a temporary
-//! directory. Compare with a PyTorch reference implementation of the same training step (hidden 16,
-//! 6 features, 7,776 windows, attitude inputs, batch B), run back to back on the same machine.
+//! the PyTorch comparison in docs/performance.md (hidden 16, p = 6, g and W on the attitude,
+//! windows of N = 5 states, RK4; 7,776 windows: the paper's 8 × 1080 less the 10 % held out). The
+//! windows come from a fresh `collect` of the paper's 8 disturbed realizations (no calm one) in a
+//! temporary directory. Compare with a PyTorch reference implementation of the same training step
+//! (hidden 16, 6 features, 7,776 windows, attitude inputs, batch B), run back to back on the same
+//! machine.
 
 use super::{data, r#loop, TrainConfig};
 use crate::collect::{self, CollectConfig};

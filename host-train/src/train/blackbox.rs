@@ -391,8 +391,8 @@ fn evaluate(
     (errors, ((orth_sq / m).sqrt(), orth_max), loss_sum / m)
 }
 
-/// The data-efficiency comparison at each of `fractions` of the training windows: the structured model
-/// ([`super::run`], weights written under the system temp directory) and the black box, both
+/// The data-efficiency comparison at each of `fractions` of the training windows: the structured
+/// model ([`super::run`], weights written under the system temp directory) and the black box, both
 /// with `epochs` epochs, batch 128, seed 0 and the default held-out split.
 ///
 /// # Errors

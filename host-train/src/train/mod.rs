@@ -32,7 +32,8 @@ pub use export::TrainReport;
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainConfig {
     /// Epochs over the training windows (default 10, then [`TrainConfig::feature_epochs`]
-    /// of the feature stage: 22 in all, about 24 s on 2 cores with burn's autodiff; docs/training.md).
+    /// of the feature stage: 22 in all, about 24 s on 2 cores with burn's autodiff;
+    /// docs/training.md).
     pub epochs: usize,
     /// Adam's peak learning rate (default 3e-3), reached after the warm-up and decayed by a
     /// cosine to 1/20 of it.
@@ -268,7 +269,8 @@ pub struct TrainArgs {
     /// gets four rotor gains next to its a_j, the multiplicative twin of a_j (pinned to 1 on
     /// `--calm` flights, dropped in flight), so that one flight's weak rotors or sagging
     /// battery scale that flight's commands and not the shared g; this assumes the CF2X mixer.
-    /// With this flag the shared g absorbs the flights' mean thrust deficit (calm-air identifiability, docs/training.md).
+    /// With this flag the shared g absorbs the flights' mean thrust deficit (calm-air
+    /// identifiability, docs/training.md).
     #[arg(long)]
     pub no_flight_rotor_gains: bool,
     /// Write the blob without the flight check: by default the new model first flies an 8 s
