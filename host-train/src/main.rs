@@ -35,7 +35,7 @@ enum Command {
     Track(host_train::estimator::TrackArgs),
     /// Drive a core controller from an external simulator: one JSON request per line on stdin
     /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
-    /// thrust, torques, a, faults). See the README for the protocol.
+    /// thrust, torques, a, faults). See docs/formats.md for the protocol.
     Bridge(host_train::bridge::BridgeArgs),
     /// The whole project in one command: collect a dataset, train the Hamiltonian model, fly
     /// paper-spiral with pid, geometric, geometric-adaptive, learned and adaptive; writes
