@@ -6,8 +6,8 @@
 #
 # Needs qemu-system-arm and either arm-none-eabi-size (binutils-arm-none-eabi) or llvm-size
 # (rustup component llvm-tools); adds the thumbv7em-none-eabihf target itself when missing.
-# From the repository root: `cargo fw-report` (same arguments and FEATURES). Budgets (the
-# README's): step <= 10,000 instructions for the default build (FEATURES empty), flash <= 64 KiB
+# From the repository root: `cargo fw-report` (same arguments and FEATURES). Budgets (those
+# of docs/design.md): step <= 10,000 instructions for the default build (FEATURES empty), flash <= 64 KiB
 # (the Crazyflie image with the weights, every feature set), static RAM <= 32 KiB. The table is
 # printed first; then the script fails if a budget is exceeded.
 # The estimated cycles per step come from QEMU's instruction trace of a 200-step bench

@@ -7,7 +7,7 @@
 //! Sign: the disturbance enters 𝔭̇ as +W a*, the controller subtracts W a; with
 //! V = ½ k_p‖e_p‖² + ½ m‖e_v‖² + ½ ãᵀΓ⁻¹ã (ã = a* − a) this law cancels the cross term.
 //!
-//! **Robust modification (issue 11, against windup):** the paper's law integrates the tracking
+//! **Robust modification (against windup):** the paper's law integrates the tracking
 //! errors whatever their cause. A 0.5 m step makes e_p ≈ 0.5 m for a second, which the law reads
 //! as a disturbance and winds a up; unwinding takes seconds (`step`: 0.51 cm RMSE over t ≥ 5 s,
 //! against 0.0015 cm for the geometric controller without adaptation). Guards, for both laws:
@@ -95,7 +95,7 @@ pub struct AdaptationRates {
     /// the law all but stops while the vehicle is far from the reference (a transient, not a
     /// disturbance) and runs at full rate near it.
     pub soft_freeze_m: f32,
-    /// Normalized gradient (issue 10 item 4, issue 11 item 3): ȧ is divided by
+    /// Normalized gradient: ȧ is divided by
     /// max(1, ‖W̃‖²_F / (h p)), where W̃ is W in nominal units (force rows divided by m, torque
     /// rows by [`NOMINAL_TORQUE_FEATURE_NM`]), p = FEATURES is ‖W̃‖²_F of the nominal features
     /// and h = [`NORMALIZATION_HEADROOM`]. The rates are tuned in nominal feature units; the

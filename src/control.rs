@@ -2,8 +2,8 @@
 //! (paper eq. `ES_DI_COMP_control`), u = u_ES + u_DI + u_DC, and the [`FlightController`] that
 //! owns the model, the gains and the adaptation state.
 //!
-//! Expanded for the quadrotor (MATH.md), with body-frame errors e_p = Rᵀ(p − p*),
-//! e_v = v − Rᵀv*, e_R = ½(R*ᵀR − RᵀR*)^∨, e_ω = ω − RᵀR*ω*:
+//! Expanded for the quadrotor (docs/math.md, "The IDA-PBC control law"), with body-frame errors
+//! e_p = Rᵀ(p − p*), e_v = v − Rᵀv*, e_R = ½(R*ᵀR − RᵀR*)^∨, e_ω = ω − RᵀR*ω*:
 //!
 //! - b_v = m g Rᵀe₃ − 𝔭_v × ω − k_p e_p + 𝔭̇*_v − k_v e_v − (W a)_v, with 𝔭̇*_v = m(Rᵀa* − ω × Rᵀv*);
 //! - b_ω = ω × Jω − k_R e_R + 𝔭̇*_ω − k_ω e_ω − (W a)_ω, with 𝔭̇*_ω = −J(ω × RᵀR*ω*) (ω̇* ≈ 0);

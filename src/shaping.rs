@@ -1,7 +1,7 @@
 //! Setpoint shaping: a reference model that turns a jump of the setpoint into a motion the
 //! vehicle can follow, so that the adaptation sees disturbances and not transients.
 //!
-//! **Why (issue 11, windup).** The adaptation law (paper eq. `geometric_adaptive_law`) integrates
+//! **Why (windup).** The adaptation law (paper eq. `geometric_adaptive_law`) integrates
 //! the tracking errors whatever their cause. A setpoint that jumps 0.5 m makes e_p ≈ 0.5 m for a
 //! second; the law reads that as a disturbance and winds a up, and unwinding takes seconds
 //! (`step`: 0.51 cm RMSE over t ≥ 5 s with the paper's law). Clipping and freezing the law's

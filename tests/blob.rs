@@ -1,4 +1,4 @@
-//! Tests for `hamflight::blob` (issue 2): exact round trips, and rejection with the right error of
+//! Tests for `hamflight::blob`: exact round trips, and rejection with the right error of
 //! every single-byte corruption, every truncation and any appended bytes of a valid blob.
 //!
 //! The blobs here are written by an independent encoder that follows the documented layout

@@ -223,7 +223,7 @@ fn rotation_tolerance_is_documented_value() {
     assert!(!hamflight::is_rotation(&r));
 }
 
-/// The vehicle's mass is data (issue 10 item 3): a blob's mass sets the hover thrust and the
+/// The vehicle's mass is data: a blob's mass sets the hover thrust and the
 /// translational gains, for the learned and the nominal model alike.
 #[test]
 fn the_models_mass_sets_hover_thrust_and_gains() {

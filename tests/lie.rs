@@ -1,4 +1,4 @@
-//! Property tests for `hamflight::lie` (issue 2): exp/log round trips on SO(3) including the
+//! Property tests for `hamflight::lie`: exp/log round trips on SO(3) including the
 //! half turn, orthonormality, the paper's rotation error against an independent f64 formula,
 //! geodesic distance, and degenerate inputs.
 

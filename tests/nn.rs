@@ -1,4 +1,4 @@
-//! Tests for `hamflight::nn` (issue 2): a hand-computed forward pass, the JVP against central
+//! Tests for `hamflight::nn`: a hand-computed forward pass, the JVP against central
 //! finite differences and an explicit f64 Jacobian, and the VJP as the JVP's transpose.
 
 mod common;

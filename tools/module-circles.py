@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Fails if the top-level modules of host-train/src import each other in a circle (issue 11:
-no import circles). Looks at `crate::NAME` in code (not comments) of every file under a module."""
+"""Fails if the top-level modules of host-train/src import each other in a circle.
+Looks at `crate::NAME` in code (not comments) of every file under a module."""
 import os
 import re
 import sys

@@ -17,7 +17,7 @@
 //! most): 1 tag + 3 seq + 53 state + 57 setpoint, 4 CRC, 1 COBS, 1 delimiter. Without its
 //! setpoint (the firmware keeps the last one) 64 (66); with an accelerometer 12 more. A
 //! [`Telemetry`] is 84 bytes in flight, 98 at most. At 10 bits per byte (8N1) a UART carries
-//! baud / 10 000 bytes per ms each way: the README's performance section has the budget at 500 Hz
+//! baud / 10 000 bytes per ms each way: docs/performance.md has the budget at 500 Hz
 //! and 1 kHz.
 //!
 //! This file is also compiled into the host's processor-in-the-loop test

@@ -733,8 +733,8 @@ fn dt_is_one_period_after_a_watchdog_trip() {
     assert_eq!(l.report().watchdog_trips, 1);
 }
 
-/// The frame sizes the link's module doc, `crazyflie.rs`'s baud rate and the README's link budget
-/// are computed from (postcard varints at their longest, and at a sequence number below 2²¹).
+/// The frame sizes the link's module doc, `crazyflie.rs`'s baud rate and docs/performance.md's link
+/// budget are computed from (postcard varints at their longest, and at a sequence number below 2²¹).
 #[test]
 fn frame_sizes_fit_the_baud_budget() {
     let len = |msg: &Uplink| {

@@ -1,5 +1,5 @@
-//! The README's table of the two adaptation laws (issue 13): every scenario that exercises the
-//! estimator, both laws side by side on both adaptive controllers.
+//! The table of the two adaptation laws in docs/adaptation.md: every scenario that exercises
+//! the estimator, both laws side by side on both adaptive controllers.
 //!
 //! `cargo run --release -p host-train --example adaptation_table`
 

@@ -1,6 +1,6 @@
-//! The adaptation's bandwidth (issue 13): amplitude ratio and phase lag of the compensated
-//! specific force R (W a)_v / m against a sinusoidal wind of 0.5 m/s² along x, hovering, for
-//! both adaptation laws on both adaptive controllers.
+//! The adaptation's bandwidth (docs/adaptation.md): amplitude ratio and phase lag of the
+//! compensated specific force R (W a)_v / m against a sinusoidal wind of 0.5 m/s² along x,
+//! hovering, for both adaptation laws on both adaptive controllers.
 //!
 //! `cargo run --release -p host-train --example bandwidth`
 

@@ -1,5 +1,5 @@
-//! Issue 4: structured (Hamiltonian) vs black-box MLP dynamics model, trained on 1/8, 1/2 and
-//! all of the training windows, compared on the same held-out windows.
+//! Data efficiency: structured (Hamiltonian) vs black-box MLP dynamics model, trained on 1/8, 1/2
+//! and all of the training windows, compared on the same held-out windows.
 //!
 //! `cargo run --release -p host-train --example blackbox_compare -- [DATA_DIR] [EPOCHS] [FRACS]`
 //! (defaults: `/tmp/hfdata`, 60, `0.125,0.5,1`). Prints a markdown table.

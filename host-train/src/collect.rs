@@ -14,7 +14,7 @@
 //!
 //! Beyond the paper: `--calm-realizations` (default 1) calm realizations follow the M disturbed
 //! ones, marked disturbance-free, so that the shared model learns the undisturbed vehicle and
-//! the a_j only what differs from it (issue 10, item 7).
+//! the a_j only what differs from it (calm-air identifiability, see docs/training.md).
 
 use std::path::{Path, PathBuf};
 
@@ -70,7 +70,8 @@ pub struct CollectConfig {
     /// Calm realizations appended after the M disturbed ones: no wind, all rotors at 100 %,
     /// marked disturbance-free (training pins their a_j to 0). Without one, the shared model
     /// and the a_j can trade any constant effect, and the learned g takes up the realizations'
-    /// mean thrust deficit (issue 10, item 7); one anchors g to the calm vehicle.
+    /// mean thrust deficit (calm-air identifiability, docs/training.md); one anchors g to the calm
+    /// vehicle.
     #[arg(long, default_value_t = 1)]
     pub calm_realizations: usize,
 }

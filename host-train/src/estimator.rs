@@ -1,6 +1,6 @@
 //! How fast the adaptation follows a changing disturbance: the amplitude ratio and phase lag of
-//! the compensated specific force R (W a)_v / m against a sinusoidal wind, hovering (issue 13's
-//! bandwidth measurement).
+//! the compensated specific force R (W a)_v / m against a sinusoidal wind, hovering (the
+//! bandwidth table of docs/adaptation.md).
 
 use anyhow::Result;
 use hamflight::model::HamiltonianModel;
@@ -18,7 +18,7 @@ use crate::scenario::Scenario;
 pub const AMPLITUDE_M_S2: f64 = 0.5;
 /// The time before the fit starts (s): the estimate's start-up transient.
 pub const SETTLE_S: f64 = 4.0;
-/// The frequencies of issue 13's table (Hz).
+/// The frequencies of the bandwidth table in docs/adaptation.md (Hz).
 pub const FREQUENCIES_HZ: [f64; 4] = [0.25, 0.5, 1.0, 2.0];
 
 // The data the plots draw are defined with them (`plot` does not depend on this module).

@@ -1,6 +1,6 @@
 //! Scores around the disturbance's events (a rotor fault, a wind step): the peak error after
 //! each, how long the vehicle takes to recover, and the RMSE over the 5 s after it. They go into
-//! `report.json` under `events` (issue 13's `rotor-loss-mid` and `hover-wind-step`).
+//! `report.json` under `events` (`rotor-loss-mid` and `hover-wind-step`, docs/adaptation.md).
 
 use serde::{Deserialize, Serialize};
 

@@ -38,12 +38,12 @@
 //! # Motor dynamics (`--motor-tau-s T`)
 //!
 //! The log holds the *commanded* wrench; with motor lag the rotors realize it only after a
-//! delay, and a model trained on the commanded wrench takes up the lag elsewhere (the probe of
-//! issue 10 learned a J 5× too large). With `--motor-tau-s T` the importer turns each logged
-//! command into the realized one the trainer integrates. The log has no motor outputs, so the
-//! wrench is taken apart per rotor through the CF2X mixer inverse (squared rotor speeds ωᵢ², as
-//! [`crate::plant::VehicleParams::wrench_to_rpm_squared`]), each rotor speed follows the
-//! commanded one through the first-order lag ω̇ᵢ = (ωᵢ,cmd − ωᵢ)/T from sample to sample
+//! delay, and a model trained on the commanded wrench takes up the lag elsewhere (on the heavy
+//! vehicle of docs/vehicles.md it learned a J 5× too large). With `--motor-tau-s T` the importer
+//! turns each logged command into the realized one the trainer integrates. The log has no motor
+//! outputs, so the wrench is taken apart per rotor through the CF2X mixer inverse (squared rotor
+//! speeds ωᵢ², as [`crate::plant::VehicleParams::wrench_to_rpm_squared`]), each rotor speed follows
+//! the commanded one through the first-order lag ω̇ᵢ = (ωᵢ,cmd − ωᵢ)/T from sample to sample
 //! (exactly, the command held between samples), and the stored wrench is that of the step's
 //! mean ωᵢ² (exact for the lag). The filter starts at each continuous stretch's first command
 //! (the rotors at steady state) and runs over every decoded sample before the airborne rule

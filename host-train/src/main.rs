@@ -24,7 +24,8 @@ enum Command {
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
-    /// windows, the sizes of issue 12's PyTorch comparison; prints seconds per epoch.
+    /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
+    /// epoch.
     BenchTrain(host_train::train::bench::BenchArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::eval::EvalArgs),
@@ -34,13 +35,13 @@ enum Command {
     Track(host_train::estimator::TrackArgs),
     /// Drive a core controller from an external simulator: one JSON request per line on stdin
     /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
-    /// thrust, torques, a, faults). See the README for the protocol.
+    /// thrust, torques, a, faults). See docs/formats.md for the protocol.
     Bridge(host_train::bridge::BridgeArgs),
     /// The whole project in one command: collect a dataset, train the Hamiltonian model, fly
     /// paper-spiral with pid, geometric, geometric-adaptive, learned and adaptive; writes
     /// DIR/report.json and SVG figures, prints a table.
     Demo(host_train::demo::DemoArgs),
-    /// Issue 10's study on a vehicle the nominal model does not know (0.034 kg, inertia ×1.3,
+    /// The study on a vehicle the nominal model does not know (0.034 kg, inertia ×1.3,
     /// rotor 3 at 90 %, 20 ms motor lag, drag, noise): log Lee flights as uSD logs, import,
     /// train N seeds, fly the calm spiral and paper-spiral on it; writes DIR/report.json and
     /// DIR/table.md, prints the table.

@@ -74,7 +74,7 @@ impl Default for VehicleParams {
 }
 
 impl VehicleParams {
-    /// The Crazyflie CF2X constants of DESIGN.md.
+    /// The Crazyflie CF2X constants (docs/design.md, "The vehicle").
     pub fn cf2x() -> Self {
         Self {
             mass_kg: 0.027,

@@ -46,7 +46,7 @@
 //! pos_m = 0.0; vel_m_s = 0.0; att_rad = 0.0; rate_rad_s = 0.0
 //! acc_m_s2 = 0.0                 # accelerometer noise σ (m/s²), its own random stream
 //!
-//! [vehicle]                      # optional; default: the CF2X of DESIGN.md
+//! [vehicle]                      # optional; default: the CF2X of docs/design.md
 //! mass_kg = 0.034                # mass (kg); the motors' top speed stays the CF2X's, so the
 //!                                # thrust-to-weight ratio falls as the mass grows
 //! inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.821e-5]  # diag(J) (kg·m²)

@@ -1,4 +1,4 @@
-//! `host-train vehicle-study`: issue 10's evidence on a vehicle the nominal model does not know.
+//! `host-train vehicle-study`: the evidence on a vehicle the nominal model does not know.
 //!
 //! 1. **Log.** Bitcraze's Lee-type geometric controller ([`crate::baselines::Geometric`], told the
 //!    vehicle's true mass and inertia, as Bitcraze's Lee is configured) flies the vehicle of

@@ -1,7 +1,7 @@
-//! The adaptation laws against disturbances that change (issue 13) and against windup and wrong
-//! features (issue 11): the composite law's bars, each next to the paper's gradient law flown on
-//! the same scenario. Thresholds sit near 1.5× the values measured when they were set (in the
-//! comments: `measured`).
+//! The adaptation laws against disturbances that change and against windup and wrong
+//! features (docs/adaptation.md): the composite law's bars, each next to the paper's gradient law
+//! flown on the same scenario. Thresholds sit near 1.5× the values measured when they were set (in
+//! the comments: `measured`).
 //!
 //! Run in release: `cargo test --release -p host-train --test adaptation`.
 
@@ -136,7 +136,7 @@ fn composite_no_worse_than_the_paper_law_on_the_paper_scenarios() {
 fn no_windup_on_the_step() {
     let sc = scenario("step");
     // The default (the paper's gradient law) with setpoint shaping and its freeze: measured
-    // 0.024 cm (0.51 cm before; issue 11 item 3's bar 0.05 cm).
+    // 0.024 cm (0.51 cm without shaping; the bar is 0.05 cm).
     let d = window(&fly("adaptive", &sc));
     assert!(d <= 0.0005, "adaptive on step: {d:.6} m over t ≥ 5 s");
     let gd = window(&fly("geometric-adaptive", &sc)); // measured 0.024 cm (0.69 before)

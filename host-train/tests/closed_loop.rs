@@ -79,7 +79,7 @@ fn adaptive_holds_paper_spiral_and_beats_learned_eightyfold() {
     let learned = fly("learned", &sc);
     let a = adaptive.rmse_pos_window_m.expect("window scored");
     assert!(!adaptive.crashed, "adaptive crashed: {adaptive:?}");
-    // measured 0.0383 cm (the composite law, `adaptive-composite`: see the README).
+    // measured 0.0383 cm (the composite law, `adaptive-composite`: see docs/adaptation.md).
     assert!(a <= 0.001, "adaptive window RMSE {a:.6} m > 0.1 cm");
     assert!(!learned.crashed, "learned crashed: {learned:?}");
     let l = learned.rmse_pos_window_m.expect("window scored");
@@ -92,7 +92,7 @@ fn adaptive_holds_paper_spiral_and_beats_learned_eightyfold() {
 
 /// The paper's claim: the learned model's features beat hand-chosen ones. It holds with the
 /// paper's gradient law (the default); with the composite law the nominal model (the vehicle's
-/// true constants) predicts the measured force better and wins instead (see the README).
+/// true constants) predicts the measured force better and wins instead (see docs/adaptation.md).
 #[test]
 fn adaptive_beats_geometric_adaptive_with_the_paper_law() {
     for (sc_name, margin) in [("paper-spiral", 1.3), ("paper-spiral-realistic", 1.03)] {
@@ -222,7 +222,7 @@ fn adaptive_holds_paper_spiral_on_a_less_ideal_plant() {
     let r = fly("adaptive", &sc);
     assert!(!r.crashed, "{r:?}");
     let e = r.rmse_pos_window_m.expect("window scored");
-    // measured 0.183 cm (the composite law: see the README).
+    // measured 0.183 cm (the composite law: see docs/adaptation.md).
     assert!(e < 0.0055, "adaptive on the realistic plant: {e:.5} m");
 }
 

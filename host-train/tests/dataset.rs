@@ -33,8 +33,9 @@ fn small() -> CollectConfig {
     }
 }
 
-/// The default collection ends with a calm realization (issue 10, item 7): no wind, rotors at
-/// 100 %, marked disturbance-free; the disturbed ones before it are unchanged by it.
+/// The default collection ends with a calm realization (calm-air identifiability,
+/// docs/training.md): no wind, rotors at 100 %, marked disturbance-free; the disturbed ones before
+/// it are unchanged by it.
 #[test]
 fn default_collection_adds_a_calm_disturbance_free_realization() {
     let (with, without) = (tmpdir("calm-1"), tmpdir("calm-0"));

@@ -1,4 +1,4 @@
-//! Time-varying wind, mid-flight faults and the synthesized accelerometer (issue 13's scenario
+//! Time-varying wind, mid-flight faults and the synthesized accelerometer (the adaptation scenario
 //! format), and the event scores of report.json.
 
 use host_train::eval::FlightLog;

@@ -1,4 +1,4 @@
-//! Issue 10 item 4: every blob the trainer writes flies the adaptive controller without
+//! Every blob the trainer writes flies the adaptive controller without
 //! crashing. Here the stock vehicle (three training seeds on a small collected dataset); the
 //! heavy vehicle the nominal model does not know is `vehicle_mismatch.rs` (three more seeds).
 //! Run in release: `cargo test --release -p host-train --test every_blob_flies`.

@@ -1,4 +1,4 @@
-//! The trainer's flight check (issue 10 item 4): a good blob passes on its vehicle, a blob that
+//! The trainer's flight check (docs/own-vehicle.md): a good blob passes on its vehicle, a blob that
 //! would crash the adaptive controller is refused with a reason, and `train` records the check.
 
 use hamflight::model::ModelWeights;

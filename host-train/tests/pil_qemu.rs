@@ -366,8 +366,8 @@ fn paper_spiral_on_qemu_matches_native() {
     pil_flight(AdaptationLaw::Gradient, Rate::Hz500);
 }
 
-/// The `loop-1khz` image: paper-spiral at a 1 kHz control rate (issue 12's "1 kHz end to end"),
-/// bit-identical to the native run at 1 kHz.
+/// The `loop-1khz` image: paper-spiral at a 1 kHz control rate ("1 kHz end to end" in
+/// docs/performance.md), bit-identical to the native run at 1 kHz.
 #[test]
 #[cfg_attr(
     hamflight_no_qemu,
@@ -378,7 +378,7 @@ fn paper_spiral_at_1khz_on_qemu_matches_native() {
 }
 
 /// The same with the composite adaptation law on both sides (no accelerometer on the link: both
-/// difference the velocity), issue 13's "bit-identical to native".
+/// difference the velocity), bit-identical to native.
 #[test]
 #[cfg_attr(
     hamflight_no_qemu,

@@ -1,10 +1,10 @@
-//! Issue 10, item 7: the shipped weights must not bake the training set's mean disturbance into
-//! g. The default collection ends with a calm, disturbance-free realization (a_j pinned to 0),
-//! which anchors g to the undisturbed vehicle, and training learns a rotor gain per rotor per
-//! flight (the multiplicative twin of a_j), so that each flight's weak rotors scale its own
-//! commands and not the shared g. Flown on `calm-spiral` — our SITL vehicle, which the nominal
-//! model describes exactly — `learned` without adaptation, against the nominal IDA-PBC law.
-//! Thresholds near 2.5× the measured values (noted as `measured`).
+//! Calm-air identifiability (docs/training.md): the shipped weights must not bake the training
+//! set's mean disturbance into g. The default collection ends with a calm, disturbance-free
+//! realization (a_j pinned to 0), which anchors g to the undisturbed vehicle, and training learns a
+//! rotor gain per rotor per flight (the multiplicative twin of a_j), so that each flight's weak
+//! rotors scale its own commands and not the shared g. Flown on `calm-spiral` — our SITL vehicle,
+//! which the nominal model describes exactly — `learned` without adaptation, against the nominal
+//! IDA-PBC law. Thresholds near 2.5× the measured values (noted as `measured`).
 //!
 //! Run in release: `cargo test --release -p host-train --test train_calm`.
 
@@ -47,7 +47,7 @@ fn learned_without_adaptation_holds_calm_air_like_the_nominal_model() {
     assert!(a < 7e-5, "adaptive in calm air: {a:.3e} m");
 }
 
-/// Issue 10's bar: in calm air, `learned` without adaptation within 1.5× of the nominal law, on
+/// The bar: in calm air, `learned` without adaptation within 1.5× of the nominal law, on
 /// the vehicle the nominal model describes exactly, with the state-estimate noise of
 /// paper-spiral-realistic (a real vehicle's estimator is never exact).
 #[test]

@@ -34,7 +34,7 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
     let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
     assert!(last(&r.heldout_learned.vel_m_s) < last(&r.heldout_nominal.vel_m_s));
     assert!(out.exists());
-    // Each flight's rotor gains (issue 10 item 7) find its weak rotors; the calm flight's are
+    // Each flight's rotor gains (docs/training.md) find its weak rotors; the calm flight's are
     // pinned at 1, and the shared thrust gain is the undisturbed vehicle's.
     for (j, real) in r.realizations.iter().enumerate() {
         let learned = real.learned_rotor_efficiency.expect("rotor gains learned");

@@ -1,4 +1,4 @@
-//! Issue 10's vehicle the nominal model does not know (`scenarios/mismatch-*.toml`: 0.034 kg,
+//! The vehicle the nominal model does not know (`scenarios/mismatch-*.toml`: 0.034 kg,
 //! inertia ×1.3, rotor 3 at 90 %, 20 ms motor lag, rotor drag, noisy states): the scenario's
 //! `[vehicle]` table, the import's motor-lag filter against the plant's lag, and the whole
 //! study (`host-train vehicle-study`, sized down): Lee flights logged as uSD logs, imported

@@ -20,7 +20,7 @@ def test_fly_a_scenario_file_and_get_numpy_arrays():
     assert log.p_m.shape == (n, 3) and log.p_ref_m.shape == (n, 3)
     assert log.err_m.shape == (n,) and log.rpm.shape == (n, 4) and log.adaptation.shape == (n, 6)
     assert not log.crashed
-    assert log.rmse_m < 0.002  # the README's 0.022 cm, with margin
+    assert log.rmse_m < 0.002  # 0.022 cm in docs/adaptation.md, with margin
     np.testing.assert_allclose(np.linalg.norm(log.p_m - log.p_ref_m, axis=1), log.err_m)
     assert log.report["scenario"] == "paper-spiral" and log.report["controller"] == "adaptive"
 

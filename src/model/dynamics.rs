@@ -1,5 +1,6 @@
 //! Hamilton's equations on SE(3) (paper eq. 1) and the velocity derivative (paper eq. 2),
-//! written out for M = diag(m I, J(q)) and V = m g e₃ᵀ p (MATH.md):
+//! written out for M = diag(m I, J(q)) and V = m g e₃ᵀ p (docs/math.md,
+//! "Hamiltonian dynamics on SE(3)"):
 //!
 //! - ṗ = R v, Ṙ = R ω̂ (ṙᵢ = rᵢ × ω);
 //! - 𝔭̇_v = 𝔭_v × ω − m g Rᵀe₃ + (g u)_v + d_v;

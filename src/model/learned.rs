@@ -266,7 +266,8 @@ pub fn nominal_feature_bias() -> [f32; super::DIST_OUT] {
     b
 }
 
-/// The gain head's output for the true g (the identity pattern of MATH.md, normalized).
+/// The gain head's output for the true g (the identity pattern of docs/math.md, "State, frames
+/// and units", normalized).
 pub fn true_gain_output() -> [f32; GAIN_OUT] {
     let g = super::true_input_gain();
     let mut out = [0.0; GAIN_OUT];

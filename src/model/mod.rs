@@ -112,7 +112,7 @@ pub const GAIN_OUT: usize = 24;
 /// Inputs of the disturbance-feature network: the rows of R. The paper's W(q, 𝔭) also sees the
 /// momentum; the disturbances this model is trained on (wind, weak rotors) do not depend on it,
 /// and with velocity inputs the network fitted spurious velocity dependence that cost the adaptive
-/// controller 3× in tracking on paper-spiral (0.074 cm against 0.022 cm; see issue 5's note).
+/// controller 3× in tracking on paper-spiral (0.074 cm against 0.022 cm).
 pub const DIST_IN: usize = 9;
 /// Outputs of the disturbance-feature network: W ∈ ℝ⁶ˣᵖ, row-major.
 pub const DIST_OUT: usize = 6 * FEATURES;

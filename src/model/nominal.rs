@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 /// disturbance for a Crazyflie, so the torque weights stay of order one.
 pub const NOMINAL_TORQUE_FEATURE_NM: f32 = 1e-3;
 
-/// The true-constant model of the CF2X (DESIGN's vehicle table).
+/// The true-constant model of the CF2X (docs/design.md, "The vehicle").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NominalModel {
     /// Mass (kg).
@@ -68,7 +68,8 @@ impl HamiltonianModel for NominalModel {
     }
 }
 
-/// The true input gain: thrust along body z, torques on the rotational rows (MATH.md).
+/// The true input gain: thrust along body z, torques on the rotational rows (docs/math.md, "State,
+/// frames and units").
 pub fn true_input_gain() -> SMatrix<f32, 6, 4> {
     #[rustfmt::skip]
     let g = SMatrix::<f32, 6, 4>::new(

@@ -1,9 +1,10 @@
 //! `host-train bench-train`: seconds per training epoch at several batch sizes, on the sizes of
-//! issue 12's PyTorch comparison (hidden 16, p = 6, g and W on the attitude, windows of N = 5
-//! states, RK4; 7,776 windows: the paper's 8 × 1080 less the 10 % held out). The windows come
-//! from a fresh `collect` of the paper's 8 disturbed realizations (no calm one) in a temporary
-//! directory. Compare with `../shared/bench/torch_ref.py --hidden 16 --features 6 --windows
-//! 7776 --attitude-inputs --batch B`, run back to back on the same machine.
+//! the PyTorch comparison in docs/performance.md (hidden 16, p = 6, g and W on the attitude,
+//! windows of N = 5 states, RK4; 7,776 windows: the paper's 8 × 1080 less the 10 % held out). The
+//! windows come from a fresh `collect` of the paper's 8 disturbed realizations (no calm one) in a
+//! temporary directory. Compare with a PyTorch reference implementation of the same training step
+//! (hidden 16, 6 features, 7,776 windows, attitude inputs, batch B), run back to back on the same
+//! machine.
 
 use super::{data, r#loop, TrainConfig};
 use crate::collect::{self, CollectConfig};
@@ -22,7 +23,7 @@ pub struct BenchArgs {
     /// Timed epochs per batch size (after one untimed warm-up epoch); the median is reported.
     #[arg(long, default_value_t = 5)]
     pub epochs: usize,
-    /// Time the trainer as it was before issue 12's speed-ups: the unfused reference loss
+    /// Time the trainer without its speed-ups (docs/performance.md): the unfused reference loss
     /// (each head on its own, J⁻¹ recomputed).
     #[arg(long)]
     pub reference: bool,

@@ -1,4 +1,4 @@
-//! Issue 4's baseline: a black-box MLP dynamics model trained on the same windows as the
+//! The data-efficiency baseline: a black-box MLP dynamics model trained on the same windows as the
 //! structured (Hamiltonian) model, for the data-efficiency comparison.
 //!
 //! The model is one tanh MLP f(R, v, ω/10, u/CONTROL_SCALE, one-hot j) → ẋ for the 18-d state
@@ -391,8 +391,8 @@ fn evaluate(
     (errors, ((orth_sq / m).sqrt(), orth_max), loss_sum / m)
 }
 
-/// The issue-4 comparison at each of `fractions` of the training windows: the structured model
-/// ([`super::run`], weights written under the system temp directory) and the black box, both
+/// The data-efficiency comparison at each of `fractions` of the training windows: the structured
+/// model ([`super::run`], weights written under the system temp directory) and the black box, both
 /// with `epochs` epochs, batch 128, seed 0 and the default held-out split.
 ///
 /// # Errors

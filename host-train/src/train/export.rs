@@ -179,7 +179,8 @@ pub fn prediction_errors_with_rotor_gains<M: HamiltonianModel>(
     }
 }
 
-/// The CF2X's rotor positions (x, y) (m) and reaction-torque signs, rotors 1..4 (DESIGN).
+/// The CF2X's rotor positions (x, y) (m) and reaction-torque signs, rotors 1..4 (docs/design.md,
+/// "The vehicle").
 const ROTORS: [(f32, f32, f32); 4] = [
     (0.028, -0.028, -1.0),
     (-0.028, -0.028, 1.0),

@@ -6,7 +6,7 @@
 //! - [`model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex + autodiff);
 //! - [`r#loop`]: Adam, the epoch loop, the progress bar;
 //! - [`bench`]: `host-train bench-train`, seconds per epoch at several batch sizes;
-//! - [`blackbox`]: issue 4's black-box MLP baseline and the data-efficiency comparison;
+//! - [`blackbox`]: the black-box MLP baseline and the data-efficiency comparison;
 //! - [`fused`]: the loss and its exact gradient as one hand-fused f32 kernel, what training
 //!   runs (burn's autodiff of [`model`] is its reference);
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
@@ -32,7 +32,8 @@ pub use export::TrainReport;
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainConfig {
     /// Epochs over the training windows (default 10, then [`TrainConfig::feature_epochs`]
-    /// of the feature stage: 22 in all, about 24 s on 2 cores; issue 12 item 5).
+    /// of the feature stage: 22 in all, about 24 s on 2 cores with burn's autodiff;
+    /// docs/training.md).
     pub epochs: usize,
     /// Adam's peak learning rate (default 3e-3), reached after the warm-up and decayed by a
     /// cosine to 1/20 of it.
@@ -56,7 +57,7 @@ pub struct TrainConfig {
     /// each Adam step those weights shrink by lr·λ. Without it the features learn to vary
     /// steeply with attitude — under each realization's wind the vehicle hovers at its own tilt,
     /// so tilt can stand in for a_j — and the adaptation law then chases the features
-    /// (paper-spiral: 0.49 cm with λ = 0; see issue 5's note).
+    /// (paper-spiral: 0.49 cm with λ = 0).
     pub feature_decay: f64,
     /// Epochs of linear learning-rate warm-up before the cosine decay (default 1).
     pub warmup_epochs: usize,
@@ -80,7 +81,7 @@ pub struct TrainConfig {
     pub flight_rotor_gains: bool,
     /// With `flight_rotor_gains`: epochs of the feature stage after training (J⁻¹ and g
     /// frozen, the rotor gains dropped, W and the a_j trained alone; default 12: paper-spiral
-    /// `adaptive` 0.046 cm after 3, 0.032 after 6, 0.022 after 12, measured in issue 10's note).
+    /// `adaptive` 0.046 cm after 3, 0.032 after 6, 0.022 after 12; docs/training.md).
     pub feature_epochs: usize,
     /// Fly the new blob in the SITL before writing it, and refuse to write one that crashes the
     /// adaptive controller ([`check`]; default true).
@@ -269,7 +270,8 @@ pub struct TrainArgs {
     /// gets four rotor gains next to its a_j, the multiplicative twin of a_j (pinned to 1 on
     /// `--calm` flights, dropped in flight), so that one flight's weak rotors or sagging
     /// battery scale that flight's commands and not the shared g; this assumes the CF2X mixer.
-    /// With this flag the shared g absorbs the flights' mean thrust deficit (issue 10 item 7).
+    /// With this flag the shared g absorbs the flights' mean thrust deficit (calm-air
+    /// identifiability, docs/training.md).
     #[arg(long)]
     pub no_flight_rotor_gains: bool,
     /// Write the blob without the flight check: by default the new model first flies an 8 s
