@@ -351,6 +351,11 @@ pub struct Output {
     pub rotors: RotorCommand,
     /// The wrench u the law asked for (before the mixer's saturation).
     pub wrench: Wrench,
+    /// The wrench to hand to an outside mixer (the Crazyflie's power distribution, a simulator
+    /// that takes thrust and moments): [`Output::wrench`] with the motor-lag lead
+    /// ([`LagCompensation`]) on the torques, the wrench `rotors` mixes. Handing over `wrench`
+    /// instead drops the lead the attitude gains were designed with.
+    pub command: Wrench,
     /// The disturbance-weight estimate a after this step.
     pub a: SVector<f32, FEATURES>,
     /// The tracking errors of this step.
@@ -436,6 +441,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         Output {
             rotors: RotorCommand::OFF,
             wrench: Wrench::default(),
+            command: Wrench::default(),
             a: self.adaptation.a,
             errors: TrackingError::default(),
             faults,
@@ -651,6 +657,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         Output {
             rotors,
             wrench,
+            command: commanded,
             a: self.adaptation.a,
             errors,
             faults,

@@ -262,3 +262,50 @@ fn the_models_mass_sets_hover_thrust_and_gains() {
         Gains::for_vehicle(&hamflight::VehicleFacts::default())
     );
 }
+
+/// `Output::command` is the wrench an outside mixer must be handed: what `rotors` mixes (so the
+/// motor-lag lead of `Gains::for_vehicle` is in it), equal to the law's `wrench` in thrust, and
+/// different from it in torque while the attitude moves.
+#[test]
+fn the_command_is_what_the_rotors_mix_and_carries_the_lag_lead() {
+    let gains = Gains::default();
+    assert!(
+        gains.lag.ratio().is_some(),
+        "the default gains compensate the motor lag"
+    );
+    let mut fc = FlightController::new(NominalModel::default(), gains);
+    let (s, sp) = hover_pair();
+    let airframe = Airframe::default();
+    let mut torque_lead_nm = 0.0f32;
+    for k in 0..200 {
+        // A roll that swings: the law's torque changes every tick, so the lead shows.
+        let phi = 0.1 * (k as f32 * 0.05).sin();
+        let tilted = State {
+            rot: Matrix3::new(
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                phi.cos(),
+                -phi.sin(),
+                0.0,
+                phi.sin(),
+                phi.cos(),
+            ),
+            ..s
+        };
+        let out = fc.step(&tilted, &sp, 0.002);
+        assert!(!out.faults.is_fault());
+        assert_eq!(out.command.thrust_n, out.wrench.thrust_n);
+        let (mixed, _) = airframe.mix(&out.command);
+        assert_eq!(
+            mixed, out.rotors,
+            "tick {k}: rotors are not the command mixed"
+        );
+        torque_lead_nm = torque_lead_nm.max((out.command.torque_nm - out.wrench.torque_nm).norm());
+    }
+    assert!(
+        torque_lead_nm > 1e-6,
+        "the command never differed from the law's wrench: no lead ({torque_lead_nm} N·m)"
+    );
+}

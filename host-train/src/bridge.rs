@@ -85,9 +85,9 @@ pub struct Reply {
     pub rpm: [f32; 4],
     /// Rotor thrusts (N).
     pub rotor_thrust_n: [f32; 4],
-    /// Collective thrust asked by the law (N).
+    /// Collective thrust to command (N): the wrench a thrust-and-moment simulator should be given.
     pub thrust_n: f32,
-    /// Body torques asked by the law (N·m).
+    /// Body torques to command (N·m): the law's, with the motor-lag lead the attitude gains assume.
     pub torque_nm: [f32; 3],
     /// Disturbance-weight estimate a.
     pub a: Vec<f32>,
@@ -131,8 +131,8 @@ pub fn serve(
                     t: req.t,
                     rpm: out.rotors.rpm,
                     rotor_thrust_n: out.rotors.thrust_n,
-                    thrust_n: out.wrench.thrust_n,
-                    torque_nm: out.wrench.torque_nm.into(),
+                    thrust_n: out.command.thrust_n,
+                    torque_nm: out.command.torque_nm.into(),
                     a: out.a.iter().copied().collect(),
                     faults: (&out.faults).into(),
                 })?

@@ -120,10 +120,10 @@ class StepResult:
         """Rotor thrusts (N), (4,)."""
     @property
     def thrust_n(self) -> float:
-        """Collective thrust the law asks (N)."""
+        """Collective thrust to command (N): what a mixer should be handed."""
     @property
     def torque_nm(self) -> F32:
-        """Body torques the law asks (N m), (3,)."""
+        """Body torques to command (N m), (3,): the law's with the motor-lag lead."""
     @property
     def wrench(self) -> F32:
         """[thrust (N), tau_x, tau_y, tau_z (N m)], (4,)."""

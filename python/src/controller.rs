@@ -435,20 +435,21 @@ impl StepResult {
     fn rotor_thrust_n<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, &self.out.rotors.thrust_n)
     }
-    /// Collective thrust the law asks (N).
+    /// Collective thrust to command (N): the wrench a mixer should be handed.
     #[getter]
     fn thrust_n(&self) -> f32 {
-        self.out.wrench.thrust_n
+        self.out.command.thrust_n
     }
-    /// Body torques the law asks (N·m), float32 (3,).
+    /// Body torques to command (N·m), float32 (3,): the law's, with the motor-lag lead the
+    /// attitude gains assume (what `rotor_thrust_n` mixes).
     #[getter]
     fn torque_nm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        PyArray1::from_slice(py, self.out.wrench.torque_nm.as_slice())
+        PyArray1::from_slice(py, self.out.command.torque_nm.as_slice())
     }
-    /// [thrust (N), τx, τy, τz (N·m)], float32 (4,).
+    /// [thrust (N), τx, τy, τz (N·m)] to command, float32 (4,).
     #[getter]
     fn wrench<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        let w = &self.out.wrench;
+        let w = &self.out.command;
         PyArray1::from_slice(
             py,
             &[w.thrust_n, w.torque_nm.x, w.torque_nm.y, w.torque_nm.z],

@@ -153,8 +153,10 @@ pub unsafe extern "C" fn hf_step(
         .step_measured(&state.to_core(), &setpoint.to_core(), &meas, dt_s);
     let faults = abi::fault_bits(&o.faults);
     if !o.faults.is_fault() {
-        out.thrust_n = o.wrench.thrust_n;
-        out.torque_nm = o.wrench.torque_nm.into();
+        // The command, not the law's wrench: it carries the motor-lag lead the attitude gains
+        // were designed with, which Bitcraze's power distribution then mixes.
+        out.thrust_n = o.command.thrust_n;
+        out.torque_nm = o.command.torque_nm.into();
     }
     out.faults = faults;
     inner.last_faults = faults;

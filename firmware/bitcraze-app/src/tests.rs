@@ -105,8 +105,8 @@ fn steps_match_the_native_controller_bit_for_bit() {
         let out = step(&mut c, &s, &sp, 0.002);
         let o = native.step(&s.to_core(), &sp.to_core(), 0.002);
         assert_eq!(out.faults, fault_bits(&o.faults));
-        assert_eq!(out.thrust_n, o.wrench.thrust_n);
-        assert_eq!(out.torque_nm, <[f32; 3]>::from(o.wrench.torque_nm));
+        assert_eq!(out.thrust_n, o.command.thrust_n);
+        assert_eq!(out.torque_nm, <[f32; 3]>::from(o.command.torque_nm));
         assert_eq!(estimate(&c), <[f32; FEATURES]>::from(native.estimate()));
     }
     assert!(estimate(&c).iter().any(|a| *a != 0.0), "the adaptation ran");

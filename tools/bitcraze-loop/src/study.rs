@@ -1,0 +1,398 @@
+//! The study's flight loop: a 1 kHz stabilizer tick as on the Crazyflie (IMU sample, Bitcraze's
+//! filters, their estimator task's iteration, the controller, their power distribution), the
+//! SITL plant in between, and host-train's scores.
+
+use std::collections::VecDeque;
+use std::f64::consts::FRAC_1_SQRT_2;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use hamflight::{Measurement, Setpoint, State};
+use host_train::eval::{Report, CRASH_ERR_M};
+use host_train::flight::{core_by_name, CoreStep};
+use host_train::flightlog::FlightLog;
+use host_train::plant::{gaussian, so3_exp};
+use host_train::Scenario;
+use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::ffi::{self, BcController, BcKind, BcPose, BcSetpoint, BcState, ImuFilter, Kalman};
+use crate::{Args, StateSource};
+
+/// The stabilizer's tick (Hz): IMU, estimator iteration, controller call, motors.
+const TICK_HZ: f64 = 1000.0;
+/// What 1 g is to Bitcraze's code (`GRAVITY_MAGNITUDE`): the accelerometer's unit.
+const G_M_S2: f64 = 9.81;
+
+/// Who flies: one of ours through the core, or one of Bitcraze's.
+enum Pilot {
+    Ours(Box<dyn CoreStep>),
+    Bitcraze(BcController),
+}
+
+/// One flight's scores and the study-only extras.
+#[derive(Clone, Debug, serde::Serialize)]
+struct Flight {
+    report: Report,
+    /// The flight's log (written to `--out`, not to report.json).
+    #[serde(skip)]
+    log: FlightLog,
+    /// Ticks on which the Kalman state left its bounds.
+    estimator_out_of_bounds: u64,
+}
+
+fn rot_of(q: &[f32; 4]) -> Matrix3<f64> {
+    let q = Quaternion::new(q[3] as f64, q[0] as f64, q[1] as f64, q[2] as f64);
+    UnitQuaternion::from_quaternion(q)
+        .to_rotation_matrix()
+        .into_inner()
+}
+
+fn quat_of(r: &Matrix3<f64>) -> [f32; 4] {
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(r));
+    [q.i as f32, q.j as f32, q.k as f32, q.w as f32]
+}
+
+fn f32x3(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn noise3(rng: &mut ChaCha8Rng, sigma: f64) -> Vector3<f64> {
+    if sigma > 0.0 {
+        Vector3::new(gaussian(rng), gaussian(rng), gaussian(rng)) * sigma
+    } else {
+        Vector3::zeros()
+    }
+}
+
+/// The scenario with the Crazyflie's published rotor geometry, so that Bitcraze's power
+/// distribution mixes for the plant it drives.
+fn with_bitcraze_geometry(scenario: &Scenario, p: &ffi::Platform) -> Scenario {
+    let mut s = scenario.clone();
+    s.vehicle.arm_xy_m = p.arm_length_m as f64 * FRAC_1_SQRT_2;
+    s.vehicle.km_nm_per_rpm2 = p.thrust_to_torque_m as f64 * s.vehicle.kf_n_per_rpm2;
+    s
+}
+
+/// The true state in Bitcraze's `state_t` form (the legacy attitude angles as their
+/// estimator writes them: pitch inverted).
+fn bc_truth(s: &host_train::PlantState, acc_world_g: Vector3<f64>) -> BcState {
+    let rpy = s.rpy().map(f64::to_degrees);
+    BcState {
+        p_m: f32x3(&s.p_m),
+        v_m_s: f32x3(&s.v_world_m_s()),
+        q_xyzw: quat_of(&s.rot),
+        rpy_deg: [rpy.x as f32, -rpy.y as f32, rpy.z as f32],
+        acc_g: f32x3(&acc_world_g),
+    }
+}
+
+fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) -> Result<Flight> {
+    let wall0 = Instant::now();
+    let spec = scenario.spec.sensors.clone().unwrap_or_default();
+    let mut plant = scenario.plant();
+    let physics_hz = scenario.spec.control_hz * scenario.physics_substeps() as f64;
+    let nsub = (physics_hz / TICK_HZ).round() as usize;
+    if nsub == 0 || (nsub as f64 * TICK_HZ - physics_hz).abs() > 1e-6 {
+        bail!(
+            "{}: physics at {physics_hz} Hz is not a multiple of the {TICK_HZ} Hz stabilizer tick",
+            scenario.name
+        );
+    }
+    let ctrl_every = (TICK_HZ / scenario.spec.control_hz).round() as u64;
+    if ctrl_every == 0 || (ctrl_every as f64 * scenario.spec.control_hz - TICK_HZ).abs() > 1e-6 {
+        bail!(
+            "{}: control at {} Hz does not divide the {TICK_HZ} Hz tick",
+            scenario.name,
+            scenario.spec.control_hz
+        );
+    }
+    let pose_every = (TICK_HZ / spec.pose_hz).round().max(1.0) as u64;
+    let latency_ticks = (spec.pose_latency_s * TICK_HZ).round() as u64;
+    let dt_phys = 1.0 / physics_hz;
+    let dt_ctrl = ctrl_every as f64 / TICK_HZ;
+    let n_ticks = (scenario.spec.duration_s * TICK_HZ).round() as u64;
+
+    let s0 = *plant.state();
+    let yaw0 = s0.rpy().z;
+    let mut kalman = Kalman::new(0, f32x3(&s0.p_m), yaw0 as f32)?;
+    let mut filter = ImuFilter::new(
+        TICK_HZ as f32,
+        spec.gyro_lpf_hz as f32,
+        spec.acc_lpf_hz as f32,
+    )?;
+    let mut rng = ChaCha8Rng::seed_from_u64(spec.seed ^ scenario.spec.seed);
+    let mut poses: VecDeque<(u64, BcPose)> = VecDeque::new();
+    let mut views: VecDeque<(BcState, [f32; 3], [f32; 3])> = VecDeque::new();
+    let mut motor_n = [0.0f32; 4];
+    let mut capped = false;
+    let mut out_of_bounds = 0;
+    let kf = plant.params.kf_n_per_rpm2;
+    let max_rpm = plant.params.max_rpm();
+    let mut log = FlightLog {
+        scenario: scenario.name.clone(),
+        controller: name.to_string(),
+        planned_duration_s: scenario.spec.duration_s,
+        control_hz: scenario.spec.control_hz,
+        physics_hz,
+        ..Default::default()
+    };
+    let mut last_rpm = [0.0; 4];
+    for tick in 0..=n_ticks {
+        let t = tick as f64 / TICK_HZ;
+        plant.set_t_s(t);
+        let truth = *plant.state();
+        let r = scenario.reference(t);
+        let logged = tick % ctrl_every == 0;
+        let err = (truth.p_m - r.p_m).norm();
+        if logged {
+            log.t_s.push(t);
+            log.p_m.push(truth.p_m.into());
+            log.p_ref_m.push(r.p_m.into());
+            log.err_m
+                .push(if err.is_finite() { err } else { f64::INFINITY });
+            log.rpy_rad.push(truth.rpy().into());
+            log.adaptation.push(match pilot {
+                Pilot::Ours(c) => c.adaptation_estimate().unwrap_or_default(),
+                Pilot::Bitcraze(_) => Vec::new(),
+            });
+        }
+        if !truth.is_finite() || !(err.is_finite() && err <= CRASH_ERR_M) || truth.p_m.z < 0.0 {
+            if logged {
+                log.rpm.push(last_rpm);
+            }
+            log.crash_time_s = Some(t);
+            break;
+        }
+        if tick == n_ticks {
+            if logged {
+                log.rpm.push(last_rpm);
+            }
+            break;
+        }
+
+        // The IMU (our noise model), through Bitcraze's filters, into their estimator.
+        let gyro = truth.w_body_rad_s
+            + Vector3::from(spec.gyro_bias_rad_s)
+            + noise3(&mut rng, spec.gyro_noise_rad_s);
+        let acc = plant.accelerometer()
+            + Vector3::from(spec.acc_bias_m_s2)
+            + noise3(&mut rng, spec.acc_noise_m_s2);
+        let mut acc_g = f32x3(&(acc / G_M_S2));
+        let mut gyro_dps = f32x3(&gyro.map(f64::to_degrees));
+        filter.apply(&mut acc_g, &mut gyro_dps);
+        kalman.imu(&acc_g, &gyro_dps);
+        if tick % pose_every == 0 {
+            let p = truth.p_m + noise3(&mut rng, spec.pose_pos_noise_m);
+            let rot = truth.rot * so3_exp(&noise3(&mut rng, spec.pose_att_noise_rad));
+            poses.push_back((
+                tick + latency_ticks,
+                BcPose {
+                    p_m: f32x3(&p),
+                    q_xyzw: quat_of(&rot),
+                    std_pos_m: spec.ekf_pos_std_m as f32,
+                    std_quat: spec.ekf_att_std_rad as f32,
+                    with_attitude: spec.pose_attitude as i32,
+                },
+            ));
+        }
+        let pose = match poses.front() {
+            Some((arrive, _)) if *arrive <= tick => poses.pop_front().map(|(_, p)| p),
+            _ => None,
+        };
+        let (mut est, ok) = kalman.step(tick as u32, true, pose.as_ref());
+        if !ok {
+            out_of_bounds += 1;
+        }
+        if source == StateSource::Truth {
+            est = bc_truth(&truth, Vector3::from(est.acc_g).cast::<f64>());
+        }
+        views.push_back((est, acc_g, gyro_dps));
+        while views.len() > spec.delay_samples + 1 {
+            views.pop_front();
+        }
+        let Some(&(seen, acc_seen, gyro_seen)) = views.front() else {
+            bail!("no estimate yet");
+        };
+
+        // The controller, then Bitcraze's power distribution.
+        match pilot {
+            Pilot::Bitcraze(c) => {
+                let sp = BcSetpoint {
+                    p_m: f32x3(&r.p_m),
+                    v_m_s: f32x3(&r.v_m_s),
+                    a_m_s2: f32x3(&r.a_m_s2),
+                    j_m_s3: f32x3(&r.j_m_s3),
+                    yaw_deg: r.yaw_rad.to_degrees() as f32,
+                };
+                capped = c.step(&sp, &acc_seen, &gyro_seen, &seen, tick as u32, &mut motor_n);
+            }
+            Pilot::Ours(c) => {
+                if logged {
+                    let rot = rot_of(&seen.q_xyzw);
+                    let v_world = Vector3::from(seen.v_m_s).cast::<f64>();
+                    let state = State {
+                        p_m: Vector3::from(seen.p_m),
+                        rot: rot.cast::<f32>(),
+                        v_body_m_s: (rot.transpose() * v_world).cast::<f32>(),
+                        w_body_rad_s: Vector3::from(gyro_seen).map(f32::to_radians),
+                    };
+                    let meas = Measurement {
+                        acc_body_m_s2: Some(Vector3::from(acc_seen) * G_M_S2 as f32),
+                    };
+                    let out = c.core_step(&state, &Setpoint::from(&r), &meas, dt_ctrl as f32);
+                    // The command (with the motor-lag lead), as the Crazyflie app hands it over.
+                    let w = out.command;
+                    capped = ffi::power_force_torque(
+                        w.thrust_n,
+                        [w.torque_nm.x, w.torque_nm.y, w.torque_nm.z],
+                        &mut motor_n,
+                    );
+                }
+            }
+        }
+        let rpm = motor_n.map(|f| ((f.max(0.0) as f64) / kf).sqrt().min(max_rpm));
+        last_rpm = rpm;
+        if logged {
+            log.rpm.push(rpm);
+            log.saturated.push(capped);
+            log.est_p_m.push(seen.p_m.map(f64::from));
+            log.control_steps += 1;
+        }
+        for _ in 0..nsub {
+            plant.step(rpm, dt_phys);
+        }
+    }
+    log.wall_s = wall0.elapsed().as_secs_f64();
+    Ok(Flight {
+        report: Report::from_flight(&log, scenario, scenario.path.as_deref()),
+        log,
+        estimator_out_of_bounds: out_of_bounds,
+    })
+}
+
+fn pilot(name: &str, args: &Args, mass_kg: f32) -> Result<Pilot> {
+    Ok(match BcKind::by_name(name) {
+        Some(kind) => Pilot::Bitcraze(BcController::new(kind, mass_kg)?),
+        None => Pilot::Ours(
+            core_by_name(name, Some(&args.weights))
+                .with_context(|| format!("controller `{name}`"))?,
+        ),
+    })
+}
+
+fn cell(r: &Report) -> String {
+    match (r.crash_time_s, r.rmse_pos_window_m) {
+        (Some(t), _) => format!("crash at {t:.1} s"),
+        (None, Some(e)) => format!("{:.2}", e * 100.0),
+        (None, None) => "–".into(),
+    }
+}
+
+/// Flies every scenario with every controller and prints (and writes) the tables.
+pub fn run(args: &Args) -> Result<()> {
+    let platform = ffi::platform();
+    let commit = env!("BITCRAZE_COMMIT");
+    let mut scenarios = Vec::new();
+    for path in &args.scenarios {
+        let s = Scenario::load(path).with_context(|| format!("scenario `{path}`"))?;
+        scenarios.push(with_bitcraze_geometry(&s, &platform));
+    }
+    for name in &args.controllers {
+        pilot(name, args, 0.027)?;
+    }
+    let mut flights: Vec<Flight> = Vec::new();
+    for s in &scenarios {
+        for name in &args.controllers {
+            let mut p = pilot(name, args, s.vehicle.mass_kg as f32)?;
+            let f = fly(s, name, &mut p, args.state)?;
+            eprintln!(
+                "{:<18} {:<22} {:>16} cm  att σ {:>5} deg  capped {:>5.1} %",
+                s.name,
+                name,
+                cell(&f.report),
+                f.report
+                    .att_std_deg
+                    .map_or("–".into(), |x| format!("{x:.2}")),
+                f.report.saturated_fraction * 100.0
+            );
+            flights.push(f);
+        }
+    }
+    let mut md = String::new();
+    writeln!(
+        md,
+        "Position RMSE over t ≥ 5 s (cm), behind Bitcraze's filters, Kalman estimator and power \
+         distribution (crazyflie-firmware {commit}; ARM_LENGTH {} m, THRUST_MAX {} N, \
+         THRUST2TORQUE {}):\n",
+        platform.arm_length_m, platform.thrust_max_n, platform.thrust_to_torque_m
+    )?;
+    write!(md, "| scenario |")?;
+    for c in &args.controllers {
+        write!(md, " `{c}` |")?;
+    }
+    writeln!(md)?;
+    write!(md, "| --- |")?;
+    for _ in &args.controllers {
+        write!(md, " --- |")?;
+    }
+    writeln!(md)?;
+    for (i, s) in scenarios.iter().enumerate() {
+        write!(md, "| {} |", s.name)?;
+        for j in 0..args.controllers.len() {
+            let f = &flights[i * args.controllers.len() + j];
+            write!(md, " {} |", cell(&f.report))?;
+        }
+        writeln!(md)?;
+    }
+    writeln!(
+        md,
+        "\nLargest roll/pitch standard deviation over t ≥ 5 s (deg) / ticks capped (%):\n"
+    )?;
+    write!(md, "| scenario |")?;
+    for c in &args.controllers {
+        write!(md, " `{c}` |")?;
+    }
+    writeln!(md)?;
+    write!(md, "| --- |")?;
+    for _ in &args.controllers {
+        write!(md, " --- |")?;
+    }
+    writeln!(md)?;
+    for (i, s) in scenarios.iter().enumerate() {
+        write!(md, "| {} |", s.name)?;
+        for j in 0..args.controllers.len() {
+            let r = &flights[i * args.controllers.len() + j].report;
+            let sd = r.att_std_deg.map_or("–".into(), |x| format!("{x:.2}"));
+            write!(md, " {sd} / {:.1} |", r.saturated_fraction * 100.0)?;
+        }
+        writeln!(md)?;
+    }
+    print!("{md}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let report = serde_json::json!({
+            "crazyflie_firmware_commit": commit,
+            "platform": platform,
+            "flights": flights,
+        });
+        host_train::fsutil::write_atomic(
+            &dir.join("report.json"),
+            serde_json::to_string_pretty(&report)?.as_bytes(),
+        )?;
+        host_train::fsutil::write_atomic(&dir.join("table.md"), md.as_bytes())?;
+        let logs = dir.join("logs");
+        std::fs::create_dir_all(&logs)?;
+        for f in &flights {
+            let file = logs.join(format!(
+                "{}-{}.json",
+                f.report.scenario, f.report.controller
+            ));
+            host_train::fsutil::write_json_atomic(&file, &f.log)?;
+        }
+        eprintln!("wrote {}/report.json, table.md and logs/", dir.display());
+    }
+    Ok(())
+}
