@@ -159,7 +159,8 @@ fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) 
                 Pilot::Bitcraze(_) => Vec::new(),
             });
         }
-        if !truth.is_finite() || !(err.is_finite() && err <= CRASH_ERR_M) || truth.p_m.z < 0.0 {
+        let flying = truth.is_finite() && err.is_finite() && err <= CRASH_ERR_M;
+        if !flying || truth.p_m.z < 0.0 {
             if logged {
                 log.rpm.push(last_rpm);
             }
