@@ -137,7 +137,12 @@ fn default_gains_are_pinned() {
     assert_eq!((stiff.k_r, stiff.k_w), (0.015, 0.002));
     assert_eq!(
         (g.rates.c_p, g.rates.c_v, g.rates.c_r, g.rates.c_w),
-        (800.0, 500.0, 20_000.0, 2_000.0)
+        (800.0, 500.0, 16_000.0, 1_600.0)
+    );
+    assert_eq!(
+        (stiff.rates.c_r, stiff.rates.c_w),
+        (20_000.0, 2_000.0),
+        "the perfect-state rates keep the full torque channel"
     );
     assert!(g.adapt);
     assert_eq!(g.law, hamflight::AdaptationLaw::Gradient);

@@ -30,7 +30,7 @@ pub const DEFAULT_WEIGHTS: &str = "weights/default.hfw";
 pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     (
         "adaptive",
-        "learned Hamiltonian model + adaptation (the paper's controller; composite law)",
+        "learned Hamiltonian model + adaptation (the paper's controller; the paper's gradient law)",
     ),
     (
         "learned",
@@ -38,7 +38,7 @@ pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     ),
     (
         "geometric-adaptive",
-        "nominal model + adaptation on a constant world force and body torque (composite law)",
+        "nominal model + adaptation on a constant world force and body torque (gradient law)",
     ),
     (
         "ida-pbc",

@@ -4,6 +4,9 @@
 //! - `fw-build`: builds every firmware binary with every feature set the READMEs mention
 //!   ([`FIRMWARE_FEATURE_SETS`]; `--bins` skips a binary whose required features are off).
 //! - `fw-report`: `firmware/report.sh` (cost and size table under QEMU), arguments passed on.
+//! - `test-all`: every test there is: the README's `cargo test --workspace --release` (arguments
+//!   passed on), then the firmware's host unit tests (`firmware/`, its own workspace, which the
+//!   root workspace's test command cannot reach).
 //!
 //! Both first make sure the thumbv7em target is installed (`firmware/tools/ensure-target.sh`).
 
@@ -69,13 +72,46 @@ fn fw_report(args: &[String]) -> Result<(), String> {
     run(cmd)
 }
 
+/// The host's target triple (`rustc -vV`), for the firmware's host-side unit tests.
+fn host_triple() -> Result<String, String> {
+    let out = Command::new("rustc")
+        .arg("-vV")
+        .output()
+        .map_err(|e| format!("cannot run rustc -vV: {e}"))?;
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
+        .ok_or_else(|| "rustc -vV printed no host triple".to_string())
+}
+
+fn test_all(args: &[String]) -> Result<(), String> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut cmd = Command::new("cargo");
+    cmd.current_dir(&root)
+        .args(["test", "--workspace", "--release"])
+        .args(args);
+    eprintln!(
+        "test-all: cargo test --workspace --release {}",
+        args.join(" ")
+    );
+    run(cmd)?;
+    let host = host_triple()?;
+    eprintln!(
+        "test-all: firmware host unit tests (cd firmware && cargo test --lib --target {host})"
+    );
+    let mut cmd = in_firmware("cargo");
+    cmd.args(["test", "--lib", "--target", &host]);
+    run(cmd)
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.split_first() {
         Some((job, rest)) if job == "fw-build" && rest.is_empty() => fw_build(),
         Some((job, rest)) if job == "fw-report" => fw_report(rest),
+        Some((job, rest)) if job == "test-all" => test_all(rest),
         _ => Err(format!(
-            "usage: cargo xtask fw-build | fw-report (got {args:?}); \
+            "usage: cargo xtask fw-build | fw-report | test-all (got {args:?}); \
              the aliases are in .cargo/config.toml"
         )),
     };
