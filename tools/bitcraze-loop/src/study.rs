@@ -292,6 +292,36 @@ fn cell(r: &Report) -> String {
     }
 }
 
+/// A markdown table: one row per scenario, one column per controller, `f` of each flight.
+fn table(
+    md: &mut String,
+    controllers: &[String],
+    scenarios: &[Scenario],
+    flights: &[Flight],
+    f: impl Fn(&Report) -> String,
+) -> std::fmt::Result {
+    write!(md, "| scenario |")?;
+    for c in controllers {
+        write!(md, " `{c}` |")?;
+    }
+    write!(md, "\n| --- |")?;
+    for _ in controllers {
+        write!(md, " --- |")?;
+    }
+    writeln!(md)?;
+    for (s, row) in scenarios
+        .iter()
+        .zip(flights.chunks(controllers.len().max(1)))
+    {
+        write!(md, "| {} |", s.name)?;
+        for flight in row {
+            write!(md, " {} |", f(&flight.report))?;
+        }
+        writeln!(md)?;
+    }
+    Ok(())
+}
+
 /// Flies every scenario with every controller and prints (and writes) the tables.
 pub fn run(args: &Args) -> Result<()> {
     let platform = ffi::platform();
@@ -330,47 +360,15 @@ pub fn run(args: &Args) -> Result<()> {
          THRUST2TORQUE {}):\n",
         platform.arm_length_m, platform.thrust_max_n, platform.thrust_to_torque_m
     )?;
-    write!(md, "| scenario |")?;
-    for c in &args.controllers {
-        write!(md, " `{c}` |")?;
-    }
-    writeln!(md)?;
-    write!(md, "| --- |")?;
-    for _ in &args.controllers {
-        write!(md, " --- |")?;
-    }
-    writeln!(md)?;
-    for (i, s) in scenarios.iter().enumerate() {
-        write!(md, "| {} |", s.name)?;
-        for j in 0..args.controllers.len() {
-            let f = &flights[i * args.controllers.len() + j];
-            write!(md, " {} |", cell(&f.report))?;
-        }
-        writeln!(md)?;
-    }
+    table(&mut md, &args.controllers, &scenarios, &flights, cell)?;
     writeln!(
         md,
         "\nLargest roll/pitch standard deviation over t ≥ 5 s (deg) / ticks capped (%):\n"
     )?;
-    write!(md, "| scenario |")?;
-    for c in &args.controllers {
-        write!(md, " `{c}` |")?;
-    }
-    writeln!(md)?;
-    write!(md, "| --- |")?;
-    for _ in &args.controllers {
-        write!(md, " --- |")?;
-    }
-    writeln!(md)?;
-    for (i, s) in scenarios.iter().enumerate() {
-        write!(md, "| {} |", s.name)?;
-        for j in 0..args.controllers.len() {
-            let r = &flights[i * args.controllers.len() + j].report;
-            let sd = r.att_std_deg.map_or("–".into(), |x| format!("{x:.2}"));
-            write!(md, " {sd} / {:.1} |", r.saturated_fraction * 100.0)?;
-        }
-        writeln!(md)?;
-    }
+    table(&mut md, &args.controllers, &scenarios, &flights, |r| {
+        let sd = r.att_std_deg.map_or("–".into(), |x| format!("{x:.2}"));
+        format!("{sd} / {:.1}", r.saturated_fraction * 100.0)
+    })?;
     print!("{md}");
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
