@@ -11,25 +11,10 @@ use host_train::estimator;
 use host_train::eval::{self, Report};
 use host_train::events::EventMetrics;
 use host_train::flight::{self, CoreController};
-use host_train::{Controller, PlantState, Scenario, TrajectoryPoint};
-use std::path::{Path, PathBuf};
+use host_train::{Controller, PlantState, TrajectoryPoint};
 
-fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
-}
-
-fn scenario(name: &str) -> Scenario {
-    Scenario::load(repo(&format!("scenarios/{name}.toml"))).expect("scenario loads")
-}
-
-fn fly(name: &str, sc: &Scenario) -> Report {
-    let weights = repo(flight::DEFAULT_WEIGHTS);
-    let mut ctrl = flight::by_name(name, sc, Some(&weights)).expect("controller exists");
-    let log = eval::fly(sc, ctrl.as_mut());
-    let r = Report::from_flight(&log, sc, None);
-    assert!(!r.crashed, "{name} crashed on {}: {r:?}", sc.name);
-    r
-}
+mod flight_common;
+use flight_common::{fly, repo, scenario};
 
 fn window(r: &Report) -> f64 {
     r.rmse_pos_window_m.expect("window scored")

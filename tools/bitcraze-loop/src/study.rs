@@ -332,7 +332,7 @@ pub fn run(args: &Args) -> Result<()> {
         scenarios.push(with_bitcraze_geometry(&s, &platform));
     }
     for name in &args.controllers {
-        pilot(name, args, 0.027)?;
+        pilot(name, args, hamflight::model::MASS_KG)?;
     }
     let mut flights: Vec<Flight> = Vec::new();
     for s in &scenarios {

@@ -1,0 +1,27 @@
+//! What the closed-loop test files share: repository paths, scenarios by name, and one flight
+//! of a named controller on the shipped blob that must not crash.
+
+use host_train::eval::{self, Report};
+use host_train::flight;
+use host_train::Scenario;
+use std::path::{Path, PathBuf};
+
+/// A path in the repository.
+pub fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+/// `scenarios/NAME.toml`.
+pub fn scenario(name: &str) -> Scenario {
+    Scenario::load(repo(&format!("scenarios/{name}.toml"))).expect("scenario loads")
+}
+
+/// Flies `name` (the shipped blob for the learned controllers) on `sc`; fails on a crash.
+pub fn fly(name: &str, sc: &Scenario) -> Report {
+    let weights = repo(flight::DEFAULT_WEIGHTS);
+    let mut ctrl = flight::by_name(name, sc, Some(&weights)).expect("controller exists");
+    let log = eval::fly(sc, ctrl.as_mut());
+    let r = Report::from_flight(&log, sc, None);
+    assert!(!r.crashed, "{name} crashed on {}: {r:?}", sc.name);
+    r
+}
