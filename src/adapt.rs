@@ -478,21 +478,19 @@ impl Adaptation {
 
     #[cfg(feature = "composite")]
     fn kalman(&mut self, g: &CompositeGains, a_max: f32, dt_s: f32) -> Option<Vector6<f32>> {
-        // P lives in `self.p` as a full symmetric 6×6 matrix; the updates below work on its
-        // upper triangle and mirror it, so it stays exactly symmetric. Column-major storage:
-        // p[c][r] is P(r, c), and P(r, c) = P(c, r).
-        let mut p = self.p.data.0;
+        // P lives in `self.p` as a full symmetric 6×6 matrix, updated in place (no copy of its
+        // 36 entries in and out); the updates below work on its upper triangle and mirror it,
+        // so it stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).
+        // A P whose diagonal is not positive starts again here. A non-finite entry of the upper
+        // triangle (the only part read) needs no pass of its own: it makes some s non-finite
+        // below, which drops this tick's update and starts P again.
+        let p = &mut self.p.data.0;
         let diag_ok = p
             .iter()
             .enumerate()
             .all(|(i, col)| col.get(i).is_some_and(|d| *d > 0.0));
-        if !(diag_ok && crate::fpu::all_finite(p.iter().flatten().copied())) {
-            p = [[0.0; FEATURES]; FEATURES];
-            for (i, col) in p.iter_mut().enumerate() {
-                if let Some(d) = col.get_mut(i) {
-                    *d = g.p0;
-                }
-            }
+        if !diag_ok {
+            restart_covariance(p, g.p0);
         }
         // Predict: a random walk, P ← P + Q dt (Q diagonal: force columns, then torque).
         let (qf, qt) = (g.q_force * dt_s, g.q_torque * dt_s);
@@ -504,44 +502,30 @@ impl Adaptation {
         let rows = &self.pred.h_f;
         let zf = &self.pred.z_f;
         let a0: [f32; FEATURES] = self.a.data.0[0];
-        // The prediction error with the estimate before this tick's update.
+        // The prediction error with the estimate before this tick's update (the sequence
+        // `fpu::kalman_rows` uses for its innovations, so row 0's is this ε₀).
         let mut eps = [0.0f32; 6];
         for ((e, h), z) in eps.iter_mut().zip(rows.iter()).zip(zf.iter()) {
-            *e = z - dot6(h, &a0);
+            *e = h
+                .iter()
+                .zip(a0.iter())
+                .fold(*z, |acc, (hj, aj)| acc - hj * aj);
         }
         // Update: R is diagonal, so the six rows are six scalar measurements in turn (exactly
         // the batch update, without a 6×6 solve): s = h P hᵀ + r, k = P hᵀ / s,
-        // a ← a + k (z − h a), P ← P − k (P hᵀ)ᵀ. Only the upper triangle is read and written
-        // here (P(r, c), r ≤ c, is p[c][r]); the lower is mirrored from it at the end, so P
-        // stays exactly symmetric.
+        // a ← a + k (z − h a), P ← P − k (P hᵀ)ᵀ, on P's upper triangle (`fpu::kalman_rows`);
+        // the lower is mirrored from it below, so P stays exactly symmetric.
         let mut a = a0;
-        for (i, (h, z)) in rows.iter().zip(zf.iter()).enumerate() {
-            let r = if i < 3 { g.r_force } else { g.r_torque };
-            let ph = sym_mul(&p, h);
-            let s = dot6(h, &ph) + r;
-            if !s.is_finite() {
-                // A non-finite feature: no update this tick.
-                return None;
-            }
-            // s is finite here.
-            if s <= 0.0 {
-                continue;
-            }
-            let inv = 1.0 / s;
-            // Row 0 sees the estimate before the update: its innovation is ε₀.
-            let e = if i == 0 {
-                eps.first().copied().unwrap_or(0.0)
-            } else {
-                z - dot6(h, &a)
-            };
-            let innovation = e * inv;
-            for (aj, phj) in a.iter_mut().zip(ph.iter()) {
-                *aj += phj * innovation;
-            }
-            let k: [f32; FEATURES] = core::array::from_fn(|j| ph.get(j).map_or(0.0, |v| v * inv));
-            rank1_upper(&mut p, &k, &ph);
+        let (rf, rt) = (g.r_force, g.r_torque);
+        let mut s = [rf, rf, rf, rt, rt, rt];
+        crate::fpu::kalman_rows(p, &mut a, rows, zf, &mut s);
+        if !crate::fpu::all_finite(s) {
+            // A non-finite feature: no update of a this tick, and P starts again (the rows
+            // before it already moved P).
+            restart_covariance(p, g.p0);
+            return None;
         }
-        mirror_upper(&mut p);
+        mirror_upper(p);
         // Positive diagonal (rounding may lose definiteness: start the gain again), bounded
         // largest diagonal (scaling keeps P positive definite).
         let mut dmax = 0.0f32;
@@ -549,15 +533,13 @@ impl Adaptation {
         for (i, col) in p.iter().enumerate() {
             let d = col.get(i).copied().unwrap_or(0.0);
             dpos &= d > 0.0;
-            dmax = dmax.max(d);
+            // P is finite here (every s was): a plain compare, no NaN handling.
+            if d > dmax {
+                dmax = d;
+            }
         }
         if !dpos {
-            p = [[0.0; FEATURES]; FEATURES];
-            for (i, col) in p.iter_mut().enumerate() {
-                if let Some(d) = col.get_mut(i) {
-                    *d = g.p0;
-                }
-            }
+            restart_covariance(p, g.p0);
             dmax = g.p0;
         }
         if dmax > g.p_max && dmax > 0.0 {
@@ -567,11 +549,12 @@ impl Adaptation {
             }
         }
         // P is finite here: each update subtracts kᵢ (P hᵀ)ⱼ with |kᵢ (P hᵀ)ⱼ| ≤ √(PᵢᵢPⱼⱼ)
-        // for a finite s (checked) and a finite, positive definite P (checked on entry).
+        // for a finite s (checked) and a finite, positive definite P (checked on entry). A
+        // non-finite a can only come from a non-finite z: P's update does not read z, so it
+        // stands.
         if !(crate::fpu::all_finite(a) && dmax.is_finite()) {
             return None;
         }
-        self.p.data.0 = p;
         self.set_projected(SVector::from(a), a_max);
         self.pred.eps = Some(eps);
         Some(Vector6::from(eps))
@@ -585,13 +568,6 @@ impl Adaptation {
     }
 }
 
-/// x · y of two 6-vectors, summed in index order.
-#[cfg(feature = "composite")]
-#[inline(always)]
-fn dot6(x: &[f32; FEATURES], y: &[f32; FEATURES]) -> f32 {
-    x.iter().zip(y.iter()).fold(0.0, |acc, (a, b)| acc + a * b)
-}
-
 /// P(min(r, c), max(r, c)) from the upper triangle of a column-major P (p[c][r], r ≤ c).
 #[cfg(feature = "composite")]
 #[inline(always)]
@@ -600,24 +576,12 @@ fn upper(p: &[[f32; FEATURES]; FEATURES], r: usize, c: usize) -> f32 {
     p.get(c).and_then(|col| col.get(r)).copied().unwrap_or(0.0)
 }
 
-/// P h for a symmetric P of which only the upper triangle is read.
+/// P = p0 I: the composite law's gain starts again.
 #[cfg(feature = "composite")]
-#[inline(always)]
-fn sym_mul(p: &[[f32; FEATURES]; FEATURES], h: &[f32; FEATURES]) -> [f32; FEATURES] {
-    core::array::from_fn(|i| {
-        h.iter()
-            .enumerate()
-            .fold(0.0, |acc, (j, hj)| acc + upper(p, i, j) * hj)
-    })
-}
-
-/// P ← P − k phᵀ on the upper triangle (P(r, c) for r ≤ c, stored as p[c][r]).
-#[cfg(feature = "composite")]
-#[inline(always)]
-fn rank1_upper(p: &mut [[f32; FEATURES]; FEATURES], k: &[f32; FEATURES], ph: &[f32; FEATURES]) {
-    for (c, (col, phc)) in p.iter_mut().zip(ph.iter()).enumerate() {
-        for (v, kr) in col.iter_mut().zip(k.iter()).take(c + 1) {
-            *v -= kr * phc;
+fn restart_covariance(p: &mut [[f32; FEATURES]; FEATURES], p0: f32) {
+    for (i, col) in p.iter_mut().enumerate() {
+        for (j, v) in col.iter_mut().enumerate() {
+            *v = if i == j { p0 } else { 0.0 };
         }
     }
 }

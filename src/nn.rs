@@ -13,37 +13,8 @@ use serde::de::{Error as _, SeqAccess, Visitor};
 use serde::ser::SerializeTuple;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-/// |x| beyond which the rational form below is clamped (its own value there is within its bound
-/// of 1).
-const TANH_CLAMP: f32 = 6.9;
-
-/// The hidden-layer activation, tanh, as a 9/6 odd/even rational function fitted for this
-/// project (iteratively reweighted least squares toward minimax on [0, 6.9]): |error| < 5e-6
-/// against the exact tanh for every f32 input (4.0e-6 measured on a 2·10⁵-point grid over
-/// [−10, 10]; `tests/nn.rs` checks it). On the Cortex-M4F it costs 7 multiply–adds and one
-/// division: 96 of them a step, four instructions each fewer than the 13/6 form of Eigen's
-/// `generic_fast_tanh_float` used before (error 4e-7), so about 380 instructions a step. The
-/// host trains with the exact tanh; the difference is far below the parity tolerance of the
-/// core/host model tests (1e-4 relative).
-#[inline]
-pub fn tanh(x: f32) -> f32 {
-    const A: [f32; 5] = [
-        1.0,
-        0.129_138_51,
-        2.908_879_7e-3,
-        8.925_403e-6,
-        -9.866_396e-9,
-    ];
-    const B: [f32; 4] = [1.0, 0.462_471_84, 2.373_285_6e-2, 2.251_884_4e-4];
-    // Constant bounds: clamp's bound check folds away at compile time.
-    let x = x.clamp(-TANH_CLAMP, TANH_CLAMP);
-    let x2 = x * x;
-    // Horner from the highest coefficient (constant indices: checked at compile time).
-    let p = A[..4].iter().rev().fold(A[4], |acc, c| acc * x2 + c) * x;
-    let q = B[..3].iter().rev().fold(B[3], |acc, c| acc * x2 + c);
-    // q ≥ 1 for every x (all of B is positive): the division is always defined.
-    p / q
-}
+/// The hidden-layer activation (a fitted rational tanh, [`fpu::tanh`]).
+pub use crate::fpu::tanh;
 
 /// Softplus log(1 + eˣ), computed without overflow; used for positive diagonals.
 #[inline]
@@ -86,6 +57,13 @@ impl<const I: usize, const O: usize> Dense<I, O> {
     #[inline]
     pub fn forward(&self, x: &[f32; I]) -> [f32; O] {
         fpu::affine(&self.weight, &self.bias, x)
+    }
+
+    /// tanh(W x + b) elementwise ([`fpu::affine_tanh`]): the same bits as [`Dense::forward`]
+    /// followed by [`tanh`], in one kernel on the M4F.
+    #[inline]
+    pub fn forward_tanh(&self, x: &[f32; I]) -> [f32; O] {
+        fpu::affine_tanh(&self.weight, &self.bias, x)
     }
 
     /// The linear part only, dy = W dx (the layer's Jacobian applied to a tangent).
@@ -152,6 +130,17 @@ fn tanh_slope<const N: usize>(t: &[f32; N]) -> [f32; N] {
     map(*t, |v| 1.0 - v * v)
 }
 
+/// The two hidden layers, tanh(l1(tanh(l0(x)))): one function for every output width, so the
+/// model's three heads share one copy of the M4F kernels (about 1.2 KB of flash) for a call each.
+#[inline(never)]
+fn hidden<const I: usize, const H: usize>(
+    l0: &Dense<I, H>,
+    l1: &Dense<H, H>,
+    x: &[f32; I],
+) -> [f32; H] {
+    l1.forward_tanh(&l0.forward_tanh(x))
+}
+
 /// A multilayer perceptron `I → H → H → O`: two tanh hidden layers of width `H`, linear output.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Mlp<const I: usize, const H: usize, const O: usize> {
@@ -183,9 +172,7 @@ impl<const I: usize, const H: usize, const O: usize> Mlp<I, H, O> {
     /// y = l2(tanh(l1(tanh(l0(x))))).
     #[inline]
     pub fn forward(&self, x: &[f32; I]) -> [f32; O] {
-        let h0 = map(self.l0.forward(x), tanh);
-        let h1 = map(self.l1.forward(&h0), tanh);
-        self.l2.forward(&h1)
+        self.l2.forward(&hidden(&self.l0, &self.l1, x))
     }
 
     /// Forward pass and Jacobian–vector product: returns `(y, J dx)` with J = ∂y/∂x at `x`.

@@ -124,3 +124,134 @@ fn all_finite_finds_every_nan_and_infinity() {
         }
     }
 }
+
+/// Every dense-layer path (the host's run-time FMA dispatch where the CPU has it, the generic
+/// loop elsewhere, the M4F kernels under PIL), with and without the activation, is the same fma
+/// chain: checked bit for bit at the
+/// model's two input widths, with subnormal, huge, signed-zero and non-finite values mixed in.
+#[test]
+fn dense_forward_gives_the_chains_bits_at_both_widths_and_for_special_values() {
+    fn check<const I: usize, const O: usize>(rng: &mut SplitMix64) {
+        let special = [0.0f32, -0.0, 1e-45, -3e-39, 3.0e38, f32::NAN, f32::INFINITY];
+        let pick = |rng: &mut SplitMix64| {
+            let r = rng.next_u64();
+            if r.is_multiple_of(11) {
+                special[(r >> 8) as usize % special.len()]
+            } else {
+                rng.symmetric() * 4.0
+            }
+        };
+        let mut layer = Dense::<I, O>::ZERO;
+        for v in layer.params_mut() {
+            *v = pick(rng);
+        }
+        let x: [f32; I] = core::array::from_fn(|_| pick(rng));
+        let y = layer.forward(&x);
+        let t = layer.forward_tanh(&x);
+        let same = |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        for (((yo, to), row), b) in y.iter().zip(&t).zip(&layer.weight).zip(&layer.bias) {
+            let chain = row
+                .iter()
+                .zip(&x)
+                .fold(*b, |a, (w, xi)| fpu::fma(*w, *xi, a));
+            assert!(same(*yo, chain), "{I}x{O}: {yo:e} vs the chain's {chain:e}");
+            let act = fpu::tanh(chain);
+            assert!(same(*to, act), "{I}x{O}: tanh {to:e} vs {act:e}");
+        }
+    }
+    let mut rng = SplitMix64(5);
+    for _ in 0..500 {
+        check::<9, 16>(&mut rng);
+        check::<16, 16>(&mut rng);
+        check::<16, 36>(&mut rng);
+        check::<3, 5>(&mut rng);
+    }
+}
+
+/// The composite law's six scalar updates ([`fpu::kalman_rows`]) against the same updates in
+/// f64 on a full symmetric P: a, the upper triangle of P and every s agree to f32 rounding, the
+/// lower triangle is left alone, and a row with s ≤ 0 changes nothing.
+#[test]
+fn kalman_rows_match_f64_sequential_updates() {
+    let mut rng = SplitMix64(21);
+    for _ in 0..300 {
+        // P = B Bᵀ + I / 2, symmetric positive definite.
+        let b: [[f64; 6]; 6] =
+            core::array::from_fn(|_| core::array::from_fn(|_| f64::from(rng.symmetric())));
+        let mut pd = [[0.0f64; 6]; 6];
+        for (i, row) in pd.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v =
+                    (0..6).map(|k| b[i][k] * b[j][k]).sum::<f64>() + if i == j { 0.5 } else { 0.0 };
+            }
+        }
+        let mut p: [[f32; 6]; 6] =
+            core::array::from_fn(|c| core::array::from_fn(|r| pd[r][c] as f32));
+        let lower_before: Vec<f32> = (0..6)
+            .flat_map(|c| ((c + 1)..6).map(move |r| (c, r)))
+            .map(|(c, r)| p[c][r])
+            .collect();
+        let h: [[f32; 6]; 6] = core::array::from_fn(|_| core::array::from_fn(|_| rng.symmetric()));
+        let z: [f32; 6] = core::array::from_fn(|_| rng.symmetric() * 3.0);
+        let mut a: [f32; 6] = core::array::from_fn(|_| rng.symmetric());
+        let mut r = [0.1f32, 0.2, 0.3, 0.05, 0.07, 0.09];
+        // f64 reference from the f32 inputs.
+        let mut pr: [[f64; 6]; 6] =
+            core::array::from_fn(|i| core::array::from_fn(|j| f64::from(p[j.max(i)][j.min(i)])));
+        let mut ar: [f64; 6] = a.map(f64::from);
+        let mut sr = [0.0f64; 6];
+        for i in 0..6 {
+            let hi = h[i].map(f64::from);
+            let ph: [f64; 6] = core::array::from_fn(|k| (0..6).map(|j| pr[k][j] * hi[j]).sum());
+            let s = f64::from(r[i]) + (0..6).map(|j| hi[j] * ph[j]).sum::<f64>();
+            sr[i] = s;
+            let e = f64::from(z[i]) - (0..6).map(|j| hi[j] * ar[j]).sum::<f64>();
+            for j in 0..6 {
+                ar[j] += ph[j] * e / s;
+                for k in 0..6 {
+                    pr[j][k] -= ph[j] * ph[k] / s;
+                }
+            }
+        }
+        fpu::kalman_rows(&mut p, &mut a, &h, &z, &mut r);
+        let scale = pr.iter().flatten().fold(1.0f64, |m, v| m.max(v.abs()));
+        for c in 0..6 {
+            for j in 0..=c {
+                let err = (f64::from(p[c][j]) - pr[j][c]).abs();
+                assert!(err < 1e-4 * scale, "P({j},{c}) {} vs {}", p[c][j], pr[j][c]);
+            }
+        }
+        let lower_after: Vec<f32> = (0..6)
+            .flat_map(|c| ((c + 1)..6).map(move |r| (c, r)))
+            .map(|(c, r)| p[c][r])
+            .collect();
+        assert_eq!(
+            lower_before, lower_after,
+            "the lower triangle is not written"
+        );
+        let amax = ar.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        for (got, want) in a.iter().zip(ar.iter()) {
+            assert!(
+                (f64::from(*got) - want).abs() < 1e-4 * amax,
+                "a {got} vs {want}"
+            );
+        }
+        for (got, want) in r.iter().zip(sr.iter()) {
+            assert!(
+                (f64::from(*got) - want).abs() < 1e-4 * want.abs().max(1.0),
+                "s {got} vs {want}"
+            );
+        }
+    }
+    // A row with s ≤ 0 (a negative r on a zero row) leaves a and P as they were.
+    let mut p = [[0.0f32; 6]; 6];
+    for (i, col) in p.iter_mut().enumerate() {
+        col[i] = 1.0;
+    }
+    let before = p;
+    let mut a = [0.5f32; 6];
+    let mut r = [-1.0f32; 6];
+    fpu::kalman_rows(&mut p, &mut a, &[[0.0; 6]; 6], &[1.0; 6], &mut r);
+    assert_eq!((p, a), (before, [0.5; 6]));
+    assert_eq!(r, [-1.0; 6], "s = r for a zero row");
+}

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Profile of the control step from QEMU's instruction trace, with an estimate of Cortex-M4F cycles.
 
-    firmware/tools/trace-profile.py ELF [--by func|func2|line:FILE[:FUNC,...]] [--top K] [--classes] [--summary]
+    firmware/tools/trace-profile.py ELF [--by func|func2|symbol|line:FILE[:FUNC,...]] [--top K] [--classes] [--summary]
     firmware/tools/trace-profile.py --self-test
 
 ELF is a `bench` image (`cargo build --release --bin qemu --features bench[,composite]`, best
@@ -265,6 +265,11 @@ def attribute(chains, sites, addr, by):
     first). The logical call path is the call sites' inline chains and the instruction's, outer
     to inner; by function, the part is what lies below `step_measured` on that path; by line,
     the innermost frame in FILE."""
+    if by == "symbol":
+        # The function whose code this is (not inlined anywhere): where memcpy, the soft-float
+        # helpers and other out-of-line callees go.
+        own = chains.get(addr, [])
+        return short(own[-1][0]) if own else "?"
     path = []  # (function, file, line), outermost first
     for a in tuple(int(s, 16) for s in sites) + (addr,):
         path.extend(reversed(chains.get(a, [])))

@@ -222,14 +222,31 @@ pub fn inertia_inv_from_l(l: &[f32; JINV_OUT]) -> Matrix3<f32> {
     (lm * lm.transpose() + Matrix3::identity() * INERTIA_INV_EPS) * INERTIA_INV_SCALE_PER_KG_M2
 }
 
-/// g from the gain head's output (row-major 6×4): g_ik = o_ik · WRENCH_SCALEᵢ / CONTROL_SCALEₖ.
+/// WRENCH_SCALEᵢ / CONTROL_SCALEₖ, the factor [`gain_from_output`] applies to o_ik: 1 where
+/// the row and the column have the same unit (the multiply is then exact and folds away), the
+/// ratio of the force and torque scales elsewhere.
+const GAIN_FACTOR: [[f32; 4]; 6] = {
+    let mut f = [[0.0; 4]; 6];
+    let mut i = 0;
+    while i < 6 {
+        let mut k = 0;
+        while k < 4 {
+            f[i][k] = WRENCH_SCALE[i] / CONTROL_SCALE[k];
+            k += 1;
+        }
+        i += 1;
+    }
+    f
+};
+
+/// g from the gain head's output (row-major 6×4): g_ik = o_ik · (WRENCH_SCALEᵢ / CONTROL_SCALEₖ).
 pub fn gain_from_output(out: &[f32; GAIN_OUT]) -> SMatrix<f32, 6, 4> {
     let mut g = SMatrix::<f32, 6, 4>::zeros();
-    let rows = out.chunks_exact(4).zip(WRENCH_SCALE.iter()).enumerate();
-    for (i, (row, ws)) in rows {
-        for (k, (o, cs)) in row.iter().zip(CONTROL_SCALE.iter()).enumerate() {
+    let rows = out.chunks_exact(4).zip(GAIN_FACTOR.iter()).enumerate();
+    for (i, (row, factors)) in rows {
+        for (k, (o, f)) in row.iter().zip(factors.iter()).enumerate() {
             if let Some(e) = g.get_mut((i, k)) {
-                *e = o * ws / cs;
+                *e = o * f;
             }
         }
     }
