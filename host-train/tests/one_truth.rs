@@ -1,8 +1,8 @@
 //! Facts written in more than one place, checked against each other: where two copies can drift
 //! apart, a test says which one moved.
 
-use host_train::import::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
-use host_train::VehicleParams;
+use host_train::io::usdlog::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
+use host_train::sim::plant::VehicleParams;
 use std::path::Path;
 
 fn repo_file(rel: &str) -> String {
@@ -69,7 +69,7 @@ fn the_default_law_is_named_truly() {
         #[allow(unreachable_patterns)]
         _ => "composite",
     };
-    let registry = host_train::flight::CORE_CONTROLLERS
+    let registry = host_train::control::registry::CORE_CONTROLLERS
         .iter()
         .find(|(n, _)| *n == "adaptive")
         .map(|(_, d)| d.to_lowercase())

@@ -4,7 +4,7 @@
 
 use super::data::StateBatch;
 use super::data::{self, Batch, Windows};
-use super::model::{
+use super::tensor_model::{
     rk4_with, to_phase_with, to_vec, velocities_with, window_loss, Consts, Forcing, FusedHeads,
     TModel,
 };
