@@ -34,6 +34,7 @@ use serde::{Deserialize, Serialize};
 use crate::control::controller::Controller;
 pub use crate::io::files::{write_atomic, write_json_atomic};
 pub use crate::io::flightlog::FlightLog;
+use crate::sim::plant::Plant;
 use crate::sim::scenario::Scenario;
 
 /// Position error (m) above which a flight counts as crashed.
@@ -54,6 +55,20 @@ pub fn fly_with_progress(
     scenario: &Scenario,
     ctrl: &mut dyn Controller,
     progress: Option<&indicatif::ProgressBar>,
+) -> FlightLog {
+    fly_observed(scenario, ctrl, progress, |_, _, _| {})
+}
+
+/// The one SITL flight loop ([`fly`], [`fly_with_progress`], and `track`'s
+/// [`super::track::track_disturbance`]): resets `ctrl`, then at every control tick measures (the
+/// scenario's sensor chain, else its state and accelerometer noise on their own streams), steps
+/// `ctrl` and the physics; stops early on a crash. After each control step, before the physics
+/// steps, `on_tick(t, ctrl, plant)` sees the controller and the plant at tick time t.
+pub fn fly_observed<C: Controller + ?Sized>(
+    scenario: &Scenario,
+    ctrl: &mut C,
+    progress: Option<&indicatif::ProgressBar>,
+    mut on_tick: impl FnMut(f64, &C, &Plant),
 ) -> FlightLog {
     let wall0 = Instant::now();
     ctrl.reset();
@@ -130,6 +145,7 @@ pub fn fly_with_progress(
         );
         last_cmd = plant.params.clamp_rpm(cmd);
         log.rpm.push(last_cmd);
+        on_tick(t, ctrl, &plant);
         for _ in 0..nsub {
             plant.step(last_cmd, dt_phys);
             if let Some(c) = chain.as_mut() {

@@ -5,12 +5,9 @@
 use anyhow::Result;
 use hamflight::model::HamiltonianModel;
 use nalgebra::Vector3;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::control::adapter::CoreController;
-use crate::control::controller::Controller;
 use crate::sim::plant::PlantState;
 use crate::sim::scenario::Scenario;
 
@@ -48,33 +45,20 @@ pub fn sine_wind_scenario(frequency_hz: f64) -> Result<Scenario> {
     Scenario::from_toml_str(&toml, "<bandwidth>", "bandwidth")
 }
 
-/// Flies `sc` with `ctrl` (plant accelerometer fed) and returns per tick (t, true wind, estimate).
+/// Flies `sc` with `ctrl` in the one SITL loop ([`crate::fly::eval::fly_observed`]) and
+/// returns per control tick (t, true wind, estimate).
 pub fn track_disturbance<M: HamiltonianModel>(
     sc: &Scenario,
     ctrl: &mut CoreController<M>,
 ) -> Vec<DisturbanceSample> {
-    ctrl.reset();
-    let mut plant = sc.plant();
-    let mut rng = ChaCha8Rng::seed_from_u64(sc.spec.seed);
-    let dt = sc.control_dt_s();
-    let nsub = sc.physics_substeps();
-    let n = (sc.spec.duration_s / dt).round() as usize;
-    let mut out = Vec::with_capacity(n);
-    for k in 0..n {
-        let t = k as f64 * dt;
-        plant.set_t_s(t);
-        let meas = plant.measure(&mut rng);
-        let acc = plant.measure_accelerometer(&mut rng);
-        let cmd = ctrl.step_measured(t, &meas, Some(&acc), &sc.reference(t), dt);
+    let mut out = Vec::new();
+    crate::fly::eval::fly_observed(sc, ctrl, None, |t, c, plant| {
         out.push((
             t,
             plant.wind_at(t),
-            compensated_specific_force(ctrl, plant.state()),
+            compensated_specific_force(c, plant.state()),
         ));
-        for _ in 0..nsub {
-            plant.step(cmd, dt / nsub as f64);
-        }
-    }
+    });
     out
 }
 

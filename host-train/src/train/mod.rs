@@ -13,6 +13,21 @@
 //!
 //! Training here flies nothing: the flight check before a blob is written, `host-train train`
 //! and `bench-train` are [`crate::pipeline`]'s.
+//!
+//! # Changing the model or the loss
+//!
+//! The equations live in three places that must agree; change them in this order:
+//!
+//! 1. the tensor model ([`tensor_model`]): the networks, paper eq. 1–2, RK4 and the loss as burn
+//!    tensor ops, differentiated by burn's autodiff. It is the reference, and it must match the
+//!    core's f32 inference (`src/model/`) where the two overlap;
+//! 2. the fused kernel ([`fused`]): the same forward pass with its reverse pass written out by
+//!    hand (`fused/rhs.rs` for eq. 1, `fused/group.rs` for RK4 and the loss, `fused/point.rs`
+//!    and `fused/mlp.rs` for the heads). Until it is updated, train with
+//!    `--gradient burn` ([`GradientPath::Burn`]);
+//! 3. the parity test (`host-train/tests/train_parity.rs`): the core's inference against the
+//!    tensor model, and the fused kernel's loss and gradients against burn's. It must pass
+//!    before the fused path is trusted again.
 
 pub mod blackbox;
 pub mod data;
@@ -28,6 +43,30 @@ use serde::Serialize;
 use std::path::Path;
 
 pub use export::TrainReport;
+
+/// Where the training loss's gradient comes from. Recorded in [`TrainConfig::gradient`] and so in
+/// the training report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum GradientPath {
+    /// The hand-fused f32 kernel ([`fused`]); where it declines a shape, burn's autodiff, with a
+    /// warning.
+    #[default]
+    Fused,
+    /// burn's autodiff of [`tensor_model`]'s equations (the reference the kernel is tested
+    /// against; slower).
+    Burn,
+}
+
+impl GradientPath {
+    /// The environment's override: `HAMFLIGHT_TRAIN_BURN` set and neither empty nor `0`
+    /// selects [`GradientPath::Burn`]; else `None`.
+    pub fn from_env() -> Option<Self> {
+        std::env::var_os("HAMFLIGHT_TRAIN_BURN")
+            .filter(|v| !v.is_empty() && v != "0")
+            .map(|_| GradientPath::Burn)
+    }
+}
 
 /// Training settings. Saved in the report next to the weights they produced.
 #[derive(Clone, Debug, Serialize)]
@@ -97,6 +136,9 @@ pub struct TrainConfig {
     /// does, and trained freely they take up large spurious entries (see `docs/vehicles.md`).
     /// Held at zero during training instead, the rest of the model fits worse (measured there).
     pub zero_unactuated_gain_rows: bool,
+    /// Where the loss's gradient comes from (default [`GradientPath::Fused`], or
+    /// [`GradientPath::Burn`] when `HAMFLIGHT_TRAIN_BURN` overrides it: [`GradientPath::from_env`]).
+    pub gradient: GradientPath,
 }
 
 impl Default for TrainConfig {
@@ -123,6 +165,7 @@ impl Default for TrainConfig {
             flight_check: true,
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
+            gradient: GradientPath::from_env().unwrap_or_default(),
         }
     }
 }
@@ -304,6 +347,10 @@ pub struct TrainArgs {
     /// prediction turns into force errors at every attitude manoeuvre.
     #[arg(long)]
     pub free_gain: bool,
+    /// Where the loss's gradient comes from: `fused` (the hand-fused kernel) or `burn` (burn's
+    /// autodiff, the reference). Default: fused, or burn when `HAMFLIGHT_TRAIN_BURN=1`.
+    #[arg(long, value_enum, value_name = "PATH")]
+    pub gradient: Option<GradientPath>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -335,6 +382,9 @@ impl TrainArgs {
             flight_check: !self.no_flight_check,
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
+            gradient: self
+                .gradient
+                .unwrap_or_else(|| TrainConfig::default().gradient),
             ..TrainConfig::default()
         }
     }
