@@ -3,8 +3,9 @@
 //!
 //! `cargo run --release -p host-train --example adaptation_table`
 
-use host_train::eval::{self, Report};
-use host_train::{flight, Scenario};
+use host_train::control::registry;
+use host_train::fly::eval::{self, Report};
+use host_train::sim::scenario::Scenario;
 use std::path::Path;
 
 const SCENARIOS: [&str; 6] = [
@@ -28,13 +29,13 @@ fn cm(x: Option<f64>) -> String {
 
 fn main() -> anyhow::Result<()> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let weights = root.join(flight::DEFAULT_WEIGHTS);
+    let weights = root.join(registry::DEFAULT_WEIGHTS);
     println!("| scenario | controller | RMSE t ≥ 5 s (cm) | max (cm) | events: peak (cm) / recovery (s) / RMSE 5 s after (cm) |");
     println!("| --- | --- | --- | --- | --- |");
     for s in SCENARIOS {
         let sc = Scenario::load(root.join(format!("scenarios/{s}.toml")))?;
         for c in CONTROLLERS {
-            let mut ctrl = flight::by_name(c, &sc, Some(&weights))?;
+            let mut ctrl = registry::by_name(c, &sc, Some(&weights))?;
             let log = eval::fly(&sc, ctrl.as_mut());
             let r = Report::from_flight(&log, &sc, None);
             let ev: Vec<String> = r

@@ -8,9 +8,11 @@
 
 use hamflight::model::NominalModel;
 use hamflight::{AdaptationLaw, Gains, VehicleFacts};
-use host_train::eval::{self, Report};
-use host_train::flight::{self, CoreController};
-use host_train::{Controller, Scenario};
+use host_train::control::adapter::CoreController;
+use host_train::control::controller::Controller;
+use host_train::control::{adapter, registry};
+use host_train::fly::eval::{self, Report};
+use host_train::sim::scenario::Scenario;
 use std::path::PathBuf;
 
 /// Gain overrides for experiments (`--set key=value`).
@@ -46,7 +48,7 @@ impl Overrides {
 
 fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Box<dyn Controller> {
     if o.0.is_empty() && facts_tau.is_none() {
-        return flight::by_name(name, sc, None).expect("controller");
+        return registry::by_name(name, sc, None).expect("controller");
     }
     let law = if name.ends_with("-composite") {
         AdaptationLaw::Composite
@@ -65,7 +67,8 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
         g
     };
     if name.starts_with("adaptive") || name == "learned" {
-        let m = flight::load_learned(std::path::Path::new(flight::DEFAULT_WEIGHTS)).expect("blob");
+        let m =
+            adapter::load_learned(std::path::Path::new(registry::DEFAULT_WEIGHTS)).expect("blob");
         let g = mk(VehicleFacts::of(&m), name != "learned");
         Box::new(CoreController::new(name, m, g))
     } else if name.starts_with("geometric-adaptive") || name == "ida-pbc" {
@@ -73,7 +76,7 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
         let g = mk(VehicleFacts::of(&m), name != "ida-pbc");
         Box::new(CoreController::new(name, m, g))
     } else {
-        flight::by_name(name, sc, None).expect("controller")
+        registry::by_name(name, sc, None).expect("controller")
     }
 }
 
@@ -149,7 +152,7 @@ fn main() -> anyhow::Result<()> {
         for c in &controllers {
             let mut ctrl = build(c, &sc, &o, facts_tau);
             if margins {
-                use host_train::margins::{margins_of, measure_point, LoopPoint};
+                use host_train::fly::margins::{margins_of, measure_point, LoopPoint};
                 for point in [LoopPoint::Roll, LoopPoint::X] {
                     let sweep = point
                         .default_frequencies_hz()

@@ -16,9 +16,9 @@
 
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, NominalModel};
 use hamflight::{AdaptationLaw, Gains, VehicleFacts};
-use host_train::eval::{self, Report};
-use host_train::flight::{load_learned, CoreController};
-use host_train::Scenario;
+use host_train::control::adapter::{load_learned, CoreController};
+use host_train::fly::eval::{self, Report};
+use host_train::sim::scenario::Scenario;
 use nalgebra::{Matrix3, Vector3};
 use std::path::PathBuf;
 

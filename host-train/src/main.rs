@@ -16,23 +16,23 @@ struct Cli {
 enum Command {
     /// Collect training data as in the paper's Sec. 4: the DSL PID flies to random poses under
     /// M disturbance realizations; writes DIR/manifest.json and DIR/realization_NN.csv.
-    Collect(host_train::collect::CollectArgs),
+    Collect(host_train::data::collect::CollectArgs),
     /// Import flight logs (Bitcraze uSD-card deck binary logs, or the documented CSV) into a
     /// dataset for `train`: one realization per log, airborne flights only.
-    Import(host_train::import::ImportArgs),
+    Import(host_train::data::import::ImportArgs),
     /// Learn the Hamiltonian model and disturbance features (paper Problem 1) from a dataset;
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
-    BenchTrain(host_train::train::bench::BenchArgs),
+    BenchTrain(host_train::pipeline::bench::BenchArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
-    Eval(host_train::eval::EvalArgs),
+    Eval(host_train::fly::eval::EvalArgs),
     /// Fly a scenario with both adaptation laws (the paper's gradient law and the composite law)
     /// and plot each estimate against the true wind: DIR/disturbance.svg, DIR/track.json; with
     /// --bandwidth also the estimator's frequency response, DIR/bandwidth.svg.
-    Track(host_train::estimator::TrackArgs),
+    Track(host_train::fly::track::TrackArgs),
     /// Drive a core controller from an external simulator: one JSON request per line on stdin
     /// (time, p, R, body v and ω, setpoint), one JSON reply per line on stdout (rotor commands,
     /// thrust, torques, a, faults). See docs/formats.md for the protocol.
@@ -40,16 +40,16 @@ enum Command {
     /// The whole project in one command: collect a dataset, train the Hamiltonian model, fly
     /// paper-spiral with pid, geometric, geometric-adaptive, learned and adaptive; writes
     /// DIR/report.json and SVG figures, prints a table.
-    Demo(host_train::demo::DemoArgs),
+    Demo(host_train::pipeline::demo::DemoArgs),
     /// The study on a vehicle the nominal model does not know (0.034 kg, inertia ×1.3,
     /// rotor 3 at 90 %, 20 ms motor lag, drag, noise): log Lee flights as uSD logs, import,
     /// train N seeds, fly the calm spiral and paper-spiral on it; writes DIR/report.json and
     /// DIR/table.md, prints the table.
-    VehicleStudy(host_train::vehicle_study::VehicleStudyArgs),
+    VehicleStudy(host_train::pipeline::vehicle_study::VehicleStudyArgs),
     /// Measure a loop's stability margins in SITL: break the attitude loop at the plant input
     /// (or the position loop at its measurement), inject a sine per frequency, read the return
     /// ratio off the flight; prints crossover, phase and gain margins, writes DIR/margins.json.
-    Margins(host_train::margins::MarginsArgs),
+    Margins(host_train::fly::margins::MarginsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -65,15 +65,15 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Margins(args) => {
-            let rows = host_train::margins::run(&args)?;
+            let rows = host_train::fly::margins::run(&args)?;
             print!(
                 "{}",
-                host_train::margins::table(&args.scenario.display().to_string(), &rows)
+                host_train::fly::margins::table(&args.scenario.display().to_string(), &rows)
             );
         }
         Command::Collect(args) => {
             let t0 = std::time::Instant::now();
-            let m = host_train::collect::run(&args)?;
+            let m = host_train::data::collect::run(&args)?;
             let n: usize = m.realizations.iter().map(|r| r.samples).sum();
             println!(
                 "wrote {} realizations, {n} samples to {} in {:.2} s",
@@ -83,7 +83,7 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Import(args) => {
-            let files = host_train::import::run(&args)?;
+            let files = host_train::data::import::run(&args)?;
             for f in &files {
                 println!(
                     "{}: {} samples, {} kept in {} flights{}{}{}",
@@ -115,17 +115,17 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Train(args) => {
-            host_train::train::run_cli(&args)?;
+            host_train::pipeline::train::run_cli(&args)?;
         }
         Command::BenchTrain(args) => {
-            host_train::train::bench::run(&args)?;
+            host_train::pipeline::bench::run(&args)?;
         }
         Command::Eval(args) => {
-            let r = host_train::eval::run(&args)?;
+            let r = host_train::fly::eval::run(&args)?;
             println!("{}", serde_json::to_string_pretty(&r)?);
         }
         Command::Track(args) => {
-            let r = host_train::estimator::run_track(&args)?;
+            let r = host_train::fly::track::run_track(&args)?;
             for l in &r.laws {
                 println!(
                     "{} / {} law: estimate − true wind, RMS over t ≥ 5 s: {:.3} m/s²",
@@ -145,9 +145,9 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bridge(args) => host_train::bridge::run(&args)?,
         Command::Demo(args) => {
             let t0 = std::time::Instant::now();
-            let r = host_train::demo::run(&args)?;
+            let r = host_train::pipeline::demo::run(&args)?;
             println!("\n{} — {}\n", r.scenario, r.weights);
-            println!("{}", host_train::demo::table(&r.controllers));
+            println!("{}", host_train::pipeline::demo::table(&r.controllers));
             if let Some(best) = &r.best {
                 println!("best by RMSE over t ≥ 5 s: {best}");
             }
@@ -158,8 +158,8 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::VehicleStudy(args) => {
-            let r = host_train::vehicle_study::run(&args)?;
-            println!("{}", host_train::vehicle_study::table(&r));
+            let r = host_train::pipeline::vehicle_study::run(&args)?;
+            println!("{}", host_train::pipeline::vehicle_study::table(&r));
             println!(
                 "report.json, table.md, logs/, data/ and the blobs in {} ({:.0} s)",
                 args.out.display(),

@@ -7,11 +7,14 @@
 
 use hamflight::model::{HamiltonianModel, ModelTerms, NominalModel, State};
 use hamflight::{AdaptationLaw, Gains};
-use host_train::estimator;
-use host_train::eval::{self, Report};
-use host_train::events::EventMetrics;
-use host_train::flight::{self, CoreController};
-use host_train::{Controller, PlantState, TrajectoryPoint};
+use host_train::control::adapter::CoreController;
+use host_train::control::controller::Controller;
+use host_train::control::{adapter, registry};
+use host_train::fly::eval::{self, Report};
+use host_train::fly::events::EventMetrics;
+use host_train::fly::track;
+use host_train::sim::plant::PlantState;
+use host_train::sim::trajectory::TrajectoryPoint;
 
 mod flight_common;
 use flight_common::{fly, repo, scenario};
@@ -29,7 +32,7 @@ fn the_paper_law_stays_the_default() {
     assert_eq!(Gains::default().law, AdaptationLaw::Gradient);
     assert_eq!(Gains::paper().law, AdaptationLaw::Gradient);
     assert_eq!(
-        flight::gains_with(AdaptationLaw::Composite).law,
+        adapter::gains_with(AdaptationLaw::Composite).law,
         AdaptationLaw::Composite
     );
 }
@@ -84,12 +87,12 @@ fn hover_wind_step_peaks_below_60_percent_of_the_paper_law() {
 
 #[test]
 fn composite_bandwidth_at_1_hz() {
-    let weights = repo(flight::DEFAULT_WEIGHTS);
-    let model = flight::load_learned(&weights).expect("weights load");
-    let mut c = CoreController::new("c", model, flight::gains_with(AdaptationLaw::Composite));
-    let mut g = CoreController::new("g", model, flight::gains_with(AdaptationLaw::Gradient));
-    let pc = estimator::measure(&mut c, 1.0).expect("measured");
-    let pg = estimator::measure(&mut g, 1.0).expect("measured");
+    let weights = repo(registry::DEFAULT_WEIGHTS);
+    let model = adapter::load_learned(&weights).expect("weights load");
+    let mut c = CoreController::new("c", model, adapter::gains_with(AdaptationLaw::Composite));
+    let mut g = CoreController::new("g", model, adapter::gains_with(AdaptationLaw::Gradient));
+    let pc = track::measure(&mut c, 1.0).expect("measured");
+    let pg = track::measure(&mut g, 1.0).expect("measured");
     // measured: composite 0.97 / 15°, gradient 1.13 / 89°. Bar: ≥ 0.9 and ≤ 45°.
     assert!(
         (0.9..=1.15).contains(&pc.amplitude_ratio),
@@ -140,13 +143,13 @@ fn no_windup_on_the_step() {
 #[test]
 fn composite_estimate_is_calm_under_noise() {
     let sc = scenario("paper-spiral-realistic");
-    let weights = repo(flight::DEFAULT_WEIGHTS);
-    let model = flight::load_learned(&weights).expect("weights load");
+    let weights = repo(registry::DEFAULT_WEIGHTS);
+    let model = adapter::load_learned(&weights).expect("weights load");
     let mut stds = Vec::new();
     for law in [AdaptationLaw::Composite, AdaptationLaw::Gradient] {
-        let mut c = CoreController::new("a", model, flight::gains_with(law));
+        let mut c = CoreController::new("a", model, adapter::gains_with(law));
         let log = eval::fly(&sc, &mut c);
-        let s = estimator::estimate_std(&log, 10.0);
+        let s = track::estimate_std(&log, 10.0);
         assert_eq!(s.len(), 6);
         stds.push(s);
     }
@@ -191,7 +194,7 @@ fn wrong_features_keep_the_estimate_bounded_and_the_vehicle_up() {
                 scale,
                 bias,
             };
-            let gains = flight::gains_with(law);
+            let gains = adapter::gains_with(law);
             let mut c = CoreController::new("wrong", model, gains);
             let log = eval::fly(&sc, &mut c);
             let r = Report::from_log(&log, None);
@@ -240,11 +243,11 @@ fn composite_without_an_accelerometer() {
             self.0.step(t, s, r, dt)
         }
     }
-    let weights = repo(flight::DEFAULT_WEIGHTS);
-    let model = flight::load_learned(&weights).expect("weights load");
+    let weights = repo(registry::DEFAULT_WEIGHTS);
+    let model = adapter::load_learned(&weights).expect("weights load");
     for name in ["paper-spiral", "rotor-loss-mid"] {
         let sc = scenario(name);
-        let c = CoreController::new("c", model, flight::gains_with(AdaptationLaw::Composite));
+        let c = CoreController::new("c", model, adapter::gains_with(AdaptationLaw::Composite));
         let mut c = NoAccelerometer(c);
         let log = eval::fly(&sc, &mut c);
         let r = Report::from_flight(&log, &sc, None);

@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use host_train::baselines::by_name;
-use host_train::eval::{fly, Report};
-use host_train::Scenario;
+use host_train::control::registry::baseline_by_name as by_name;
+use host_train::fly::eval::{fly, Report};
+use host_train::sim::scenario::Scenario;
 
 fn scenario(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -12,11 +12,12 @@
 use hamflight::mixer::Airframe;
 use hamflight::{Gains, Wrench};
 use hamflight_bitcraze::model::MODEL;
-use host_train::controller::{Controller, TrajectoryPoint};
-use host_train::eval;
-use host_train::flight::CoreController;
-use host_train::plant::{Plant, PlantState};
-use host_train::Scenario;
+use host_train::control::adapter::CoreController;
+use host_train::control::controller::Controller;
+use host_train::fly::eval;
+use host_train::sim::plant::{Plant, PlantState};
+use host_train::sim::scenario::Scenario;
+use host_train::sim::trajectory::TrajectoryPoint;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::path::Path;

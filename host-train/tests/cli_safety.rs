@@ -3,7 +3,7 @@
 //! shipped weights unless `--out` names them. Parsed with the same clap definitions as the binary.
 
 use clap::Parser;
-use host_train::import::ImportArgs;
+use host_train::data::import::ImportArgs;
 use host_train::train::TrainArgs;
 use std::path::PathBuf;
 

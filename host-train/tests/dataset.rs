@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use host_train::collect::{collect, CollectConfig};
-use host_train::dataset::{
+use host_train::data::collect::{collect, CollectConfig};
+use host_train::io::dataset::{
     self, load, save, segments, windows, Dataset, WindowSpec, CSV_HEADER, FORMAT,
 };
-use host_train::plant::{Disturbance, Effects, Plant, VehicleParams};
+use host_train::sim::plant::{Disturbance, Effects, Plant, VehicleParams};
 
 fn tmpdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!(

@@ -3,11 +3,12 @@
 //! heavy vehicle the nominal model does not know is `vehicle_mismatch.rs` (three more seeds).
 //! Run in release: `cargo test --release -p host-train --test every_blob_flies`.
 
-use host_train::collect::{CollectArgs, CollectConfig};
-use host_train::eval::{self, Report};
-use host_train::flight;
-use host_train::scenario::Scenario;
-use host_train::train::{run, TrainConfig};
+use host_train::control::registry;
+use host_train::data::collect::{CollectArgs, CollectConfig};
+use host_train::fly::eval::{self, Report};
+use host_train::pipeline::train::run;
+use host_train::sim::scenario::Scenario;
+use host_train::train::TrainConfig;
 use std::path::Path;
 
 fn scenario(name: &str) -> Scenario {
@@ -29,7 +30,7 @@ fn three_seeds_on_the_stock_vehicle_fly_adaptive_no_worse_than_learned() {
             ..CollectConfig::default()
         },
     };
-    host_train::collect::run(&args).expect("collect");
+    host_train::data::collect::run(&args).expect("collect");
     let scenarios = [scenario("paper-spiral"), scenario("paper-spiral-realistic")];
     for seed in 0..3u64 {
         let cfg = TrainConfig {
@@ -44,7 +45,7 @@ fn three_seeds_on_the_stock_vehicle_fly_adaptive_no_worse_than_learned() {
         assert!(check.passed(), "seed {seed}: {check:?}");
         for sc in &scenarios {
             let fly = |name: &str| -> Report {
-                let mut c = flight::core_by_name(name, Some(&out)).expect("controller");
+                let mut c = registry::core_by_name(name, Some(&out)).expect("controller");
                 let log = eval::fly(sc, c.as_mut());
                 Report::from_log(&log, None)
             };

@@ -2,16 +2,16 @@
 //! would crash the adaptive controller is refused with a reason, and `train` records the check.
 
 use hamflight::model::ModelWeights;
-use host_train::dataset::VehicleDescription;
-use host_train::flight;
-use host_train::train::check;
+use host_train::control::{adapter, registry};
+use host_train::io::dataset::VehicleDescription;
+use host_train::pipeline::check;
 use std::path::Path;
 
 fn shipped() -> ModelWeights {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
-        .join(flight::DEFAULT_WEIGHTS);
-    flight::load_learned(&path)
+        .join(registry::DEFAULT_WEIGHTS);
+    adapter::load_learned(&path)
         .expect("shipped weights")
         .weights
 }

@@ -1,8 +1,8 @@
 //! Facts written in more than one place, checked against each other: where two copies can drift
 //! apart, a test says which one moved.
 
-use host_train::import::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
-use host_train::VehicleParams;
+use host_train::io::usdlog::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
+use host_train::sim::plant::VehicleParams;
 use std::path::Path;
 
 fn repo_file(rel: &str) -> String {
@@ -69,7 +69,7 @@ fn the_default_law_is_named_truly() {
         #[allow(unreachable_patterns)]
         _ => "composite",
     };
-    let registry = host_train::flight::CORE_CONTROLLERS
+    let registry = host_train::control::registry::CORE_CONTROLLERS
         .iter()
         .find(|(n, _)| *n == "adaptive")
         .map(|(_, d)| d.to_lowercase())
@@ -78,4 +78,45 @@ fn the_default_law_is_named_truly() {
         registry.contains(name),
         "`adaptive`'s description does not name the default {name} law: {registry}"
     );
+}
+
+/// `eval --controller`'s help names every controller of the registry, the one list of names.
+#[test]
+fn eval_help_names_every_registered_controller() {
+    use clap::Args;
+    let cmd = host_train::fly::eval::EvalArgs::augment_args(clap::Command::new("eval"));
+    let help = cmd
+        .get_arguments()
+        .find(|a| a.get_id() == "controller")
+        .and_then(|a| a.get_help())
+        .expect("`--controller` has a help")
+        .to_string();
+    let words: Vec<&str> = help
+        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+        .collect();
+    for name in host_train::control::registry::names() {
+        assert!(
+            words.contains(&name),
+            "`eval --controller`'s help does not name `{name}`: {help}"
+        );
+    }
+}
+
+/// Every name of the registry builds a controller, and the controller says its name back: the
+/// list and the constructors cannot drift apart.
+#[test]
+fn every_registered_name_builds() {
+    use host_train::control::registry;
+    let sc = host_train::Scenario::from_toml_str(
+        "duration_s = 1.0\n[trajectory]\nkind = \"hover\"\nposition_m = [0.0, 0.0, 1.0]\n",
+        "<registry>",
+        "registry",
+    )
+    .expect("scenario");
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join("../weights/default.hfw");
+    for name in registry::names() {
+        let c = registry::by_name(name, &sc, Some(&weights))
+            .unwrap_or_else(|e| panic!("`{name}` is registered but does not build: {e:#}"));
+        assert_eq!(c.name(), name);
+    }
 }

@@ -25,10 +25,11 @@ use std::time::{Duration, Instant};
 
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
 use hamflight::{AdaptationLaw, FlightController, Gains, Setpoint, State};
-use host_train::controller::{Controller, TrajectoryPoint};
-use host_train::eval::{fly, Report};
-use host_train::plant::PlantState;
-use host_train::scenario::Scenario;
+use host_train::control::controller::Controller;
+use host_train::fly::eval::{fly, Report};
+use host_train::sim::plant::PlantState;
+use host_train::sim::scenario::Scenario;
+use host_train::sim::trajectory::TrajectoryPoint;
 
 /// The firmware's link frames, compiled from the very same file.
 #[allow(dead_code)]

@@ -8,9 +8,10 @@
 //! Run in release: `cargo test --release -p host-train --test sensor_chain`.
 
 use hamflight::Gains;
-use host_train::eval::{self, Report};
-use host_train::flight::{self, CoreController};
-use host_train::margins::{self, LoopPoint};
+use host_train::control::adapter::CoreController;
+use host_train::control::{adapter, registry};
+use host_train::fly::eval::{self, Report};
+use host_train::fly::margins::{self, LoopPoint};
 
 mod flight_common;
 use flight_common::{fly, repo, scenario};
@@ -100,7 +101,7 @@ fn the_estimator_is_biased_by_a_steady_force_and_the_vehicle_sits_at_that_bias()
 #[test]
 fn without_the_velocity_consistency_the_biased_estimate_costs_several_times_the_bias() {
     let sc = scenario("cf-hover-wind");
-    let model = flight::load_learned(&repo(flight::DEFAULT_WEIGHTS)).expect("blob");
+    let model = adapter::load_learned(&repo(registry::DEFAULT_WEIGHTS)).expect("blob");
     let facts = hamflight::VehicleFacts::of(&model);
     let gains = Gains {
         velocity_consistency_tau_s: 0.0,
@@ -124,7 +125,7 @@ fn without_the_velocity_consistency_the_biased_estimate_costs_several_times_the_
 #[test]
 fn attitude_margins_with_the_chain_and_a_70_ms_lag() {
     let sc = scenario("cf-hover-lag70");
-    let model = flight::load_learned(&repo(flight::DEFAULT_WEIGHTS)).expect("blob");
+    let model = adapter::load_learned(&repo(registry::DEFAULT_WEIGHTS)).expect("blob");
     let facts = hamflight::VehicleFacts {
         motor_tau_s: 0.07,
         ..hamflight::VehicleFacts::of(&model)

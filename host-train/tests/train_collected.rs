@@ -2,8 +2,9 @@
 //! Sec. 4, scaled down) lowers the held-out loss by a large factor. Run in release:
 //! `cargo test --release -p host-train --test train_collected`.
 
-use host_train::collect::{CollectArgs, CollectConfig};
-use host_train::train::{run, TrainConfig};
+use host_train::data::collect::{CollectArgs, CollectConfig};
+use host_train::pipeline::train::run;
+use host_train::train::TrainConfig;
 
 #[test]
 fn short_training_on_collected_data_lowers_heldout_loss() {
@@ -17,7 +18,7 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
             ..CollectConfig::default()
         },
     };
-    host_train::collect::run(&args).expect("collect");
+    host_train::data::collect::run(&args).expect("collect");
     let cfg = TrainConfig {
         epochs: 15,
         batch: 64,

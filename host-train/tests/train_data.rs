@@ -6,7 +6,7 @@
 mod train_common;
 
 use hamflight::model::{NominalModel, FEATURES};
-use host_train::dataset::WindowSpec;
+use host_train::io::dataset::WindowSpec;
 use host_train::train::data;
 use host_train::train::export::prediction_errors;
 

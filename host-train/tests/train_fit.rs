@@ -6,7 +6,8 @@
 mod train_common;
 
 use hamflight::model::{NominalModel, FEATURES, MASS_KG};
-use host_train::train::{run, TrainConfig};
+use host_train::pipeline::train::run;
+use host_train::train::TrainConfig;
 use nalgebra::{Matrix3, Vector3};
 
 #[test]

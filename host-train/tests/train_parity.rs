@@ -5,8 +5,8 @@ mod train_common;
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, State, FEATURES};
-use host_train::train::model::{to_vec, Consts, Forcing, TModel};
 use host_train::train::r#loop::init_weights;
+use host_train::train::tensor_model::{to_vec, Consts, Forcing, TModel};
 use nalgebra::Vector4;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -326,8 +326,9 @@ fn fast_training_loss_matches_the_reference_ops() {
 /// size) gives the whole minibatch's loss and gradients, on collected data.
 #[test]
 fn split_minibatch_gradients_equal_the_whole_batch() {
-    use host_train::collect::{collect, CollectConfig};
-    use host_train::train::{data, r#loop::initial_gradients, TrainConfig};
+    use host_train::data::collect::{collect, CollectConfig};
+    use host_train::train::r#loop::initial_gradients;
+    use host_train::train::{data, TrainConfig};
     let dir = train_common::scratch("split-grads");
     let cc = CollectConfig {
         realizations: 2,
@@ -360,7 +361,7 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
 /// so that the W head and every term of the rotor gains' path carry a gradient).
 #[test]
 fn fused_kernel_gradients_equal_burns() {
-    use host_train::collect::{collect, CollectConfig};
+    use host_train::data::collect::{collect, CollectConfig};
     use host_train::train::fused::Isa;
     use host_train::train::r#loop::{gradients_at, initial_params};
     use host_train::train::{data, TrainConfig};
@@ -376,7 +377,7 @@ fn fused_kernel_gradients_equal_burns() {
     for (rotor_gains, len) in [(false, 5), (true, 5), (true, 3)] {
         let cfg = TrainConfig {
             flight_rotor_gains: rotor_gains,
-            window: host_train::dataset::WindowSpec {
+            window: host_train::io::dataset::WindowSpec {
                 len,
                 ..Default::default()
             },

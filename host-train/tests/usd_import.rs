@@ -6,12 +6,14 @@
 
 use std::path::{Path, PathBuf};
 
-use host_train::import::{self, ImportArgs, LogFormat, LEE_COMMAND_VARS};
-use host_train::usdlog::{
+use host_train::data::import::{self, ImportArgs, LogFormat};
+
+use host_train::fly::usdrecord::{logged_vars, UsdRecorder};
+use host_train::io::usdlog::LEE_COMMAND_VARS;
+use host_train::io::usdlog::{
     self, crc32, EventType, ParseOptions, UsdError, UsdWriter, Var, VarType, FIXED_FREQUENCY_ID,
 };
-use host_train::usdrecord::{logged_vars, UsdRecorder};
-use host_train::Scenario;
+use host_train::sim::scenario::Scenario;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -35,9 +37,9 @@ fn scenario(name: &str, duration_s: f64) -> Scenario {
 /// values the recorder logged.
 fn sitl_log(name: &str, duration_s: f64) -> (Vec<u8>, Vec<(u64, [f64; 20])>) {
     let sc = scenario(name, duration_s);
-    let mut ctrl = host_train::flight::by_name("geometric", &sc, None).unwrap();
+    let mut ctrl = host_train::control::registry::by_name("geometric", &sc, None).unwrap();
     let mut rec = UsdRecorder::new(ctrl.as_mut(), sc.plant().params.clone());
-    let log = host_train::eval::fly(&sc, &mut rec);
+    let log = host_train::fly::eval::fly(&sc, &mut rec);
     assert!(log.crash_time_s.is_none());
     let rows = rec.rows.clone();
     (rec.finish(), rows)
@@ -398,7 +400,7 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     assert_eq!(files[0].samples_kept, 1000);
     assert_eq!(files[0].flights, 1);
     assert!(files[1].disturbance_free);
-    let ds = host_train::dataset::load(&out).unwrap();
+    let ds = host_train::io::dataset::load(&out).unwrap();
     assert!((ds.manifest.sample_hz - 500.0).abs() < 1e-6);
     assert_eq!(ds.manifest.source, "import");
     assert!(ds.realizations[1].meta.disturbance_free);
@@ -406,7 +408,7 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     // The CSV's commands were held over the rows that left them empty.
     let f = &ds.realizations[1].flights[0].samples;
     assert_eq!(f[1].wrench, f[0].wrench);
-    let w = host_train::dataset::windows(&ds, Default::default()).unwrap();
+    let w = host_train::io::dataset::windows(&ds, Default::default()).unwrap();
     assert_eq!(w.len(), 2 * 249);
 
     // Ground: samples below the minimum height are excluded.
@@ -458,7 +460,7 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
         batch: 64,
         ..Default::default()
     };
-    let r = host_train::train::run(&cfg, &out, &dir.join("w.hfw"), true).unwrap();
+    let r = host_train::pipeline::train::run(&cfg, &out, &dir.join("w.hfw"), true).unwrap();
     assert_eq!(r.realizations.len(), 2);
     assert!(r.realizations[1].disturbance_free);
     assert!(
@@ -474,7 +476,7 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
 #[derive(clap::Parser)]
 struct EvalCli {
     #[command(flatten)]
-    eval: host_train::eval::EvalArgs,
+    eval: host_train::fly::eval::EvalArgs,
 }
 
 #[test]
@@ -494,7 +496,7 @@ fn eval_log_usd_writes_a_log_that_imports() {
         "--log-usd".as_ref(),
         log.as_os_str(),
     ] as [&std::ffi::OsStr; 9]);
-    let report = host_train::eval::run(&cli.eval).unwrap();
+    let report = host_train::fly::eval::run(&cli.eval).unwrap();
     assert!(!report.crashed);
     let bytes = std::fs::read(&log).unwrap();
     let (l, rep) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
@@ -541,8 +543,8 @@ fn version_1_logs_have_millisecond_timestamps() {
 
 #[test]
 fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
-    use host_train::dataset::Sample;
-    use host_train::PlantState;
+    use host_train::io::dataset::Sample;
+    use host_train::sim::plant::PlantState;
     // 500 Hz: 1 s on the ground (z = 0, motors idle), 3 s airborne at 0.5 m with hover thrust,
     // a 50 ms gap at t = 2.5 s, then 1 s landed again with the motors still spinning (thrust
     // above the rule's fraction, but z below the minimum height).

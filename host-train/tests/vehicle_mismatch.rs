@@ -8,11 +8,11 @@
 
 use std::path::{Path, PathBuf};
 
-use host_train::dataset::{self, Sample};
-use host_train::import::realize_commands;
-use host_train::plant::{Disturbance, Effects, Plant, PlantState, VehicleParams};
-use host_train::vehicle_study::{self, StudyReport, VehicleStudyArgs};
-use host_train::Scenario;
+use host_train::data::import::realize_commands;
+use host_train::io::dataset::{self, Sample};
+use host_train::pipeline::vehicle_study::{self, StudyReport, VehicleStudyArgs};
+use host_train::sim::plant::{Disturbance, Effects, Plant, PlantState, VehicleParams};
+use host_train::sim::scenario::Scenario;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -294,18 +294,18 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-fn import_args(out: &Path, log: &Path) -> host_train::import::ImportArgs {
-    host_train::import::ImportArgs {
+fn import_args(out: &Path, log: &Path) -> host_train::data::import::ImportArgs {
+    host_train::data::import::ImportArgs {
         out: out.to_path_buf(),
         logs: vec![log.to_path_buf()],
         calm: Vec::new(),
-        format: host_train::import::LogFormat::Auto,
+        format: host_train::data::import::LogFormat::Auto,
         mass_kg: 0.034,
         gravity_m_s2: 9.8,
         inertia_kg_m2: Some(vec![1.82e-5, 1.82e-5, 2.821e-5]),
         rotor_efficiency: Some(vec![1.0, 1.0, 0.9, 1.0]),
         motor_tau_s: Some(0.02),
-        command_vars: host_train::import::LEE_COMMAND_VARS
+        command_vars: host_train::io::usdlog::LEE_COMMAND_VARS
             .map(String::from)
             .to_vec(),
         min_height_m: 0.1,
@@ -320,16 +320,18 @@ fn import_records_the_vehicle_and_checks_its_flags() {
     let dir = tmpdir("import");
     let mut sc = scenario("mismatch-calm-spiral");
     sc.spec.duration_s = 3.0;
-    let mut lee = host_train::baselines::by_name("geometric", &sc).unwrap();
-    let mut rec = host_train::usdrecord::UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
-    assert!(host_train::eval::fly(&sc, &mut rec).crash_time_s.is_none());
+    let mut lee = host_train::control::registry::baseline_by_name("geometric", &sc).unwrap();
+    let mut rec = host_train::fly::usdrecord::UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
+    assert!(host_train::fly::eval::fly(&sc, &mut rec)
+        .crash_time_s
+        .is_none());
     let log = dir.join("heavy.bin");
     rec.write(&log).unwrap();
 
-    let bad = |f: &dyn Fn(&mut host_train::import::ImportArgs), flag: &str| {
+    let bad = |f: &dyn Fn(&mut host_train::data::import::ImportArgs), flag: &str| {
         let mut a = import_args(&dir.join("bad"), &log);
         f(&mut a);
-        let e = format!("{:#}", host_train::import::run(&a).unwrap_err());
+        let e = format!("{:#}", host_train::data::import::run(&a).unwrap_err());
         assert!(e.contains(flag), "{flag}: {e}");
         assert!(!dir.join("bad").join("manifest.json").exists());
     };
@@ -349,9 +351,9 @@ fn import_records_the_vehicle_and_checks_its_flags() {
     bad(&|a| a.motor_tau_s = Some(f64::NAN), "--motor-tau-s");
 
     let realized = dir.join("realized");
-    host_train::import::run(&import_args(&realized, &log)).unwrap();
+    host_train::data::import::run(&import_args(&realized, &log)).unwrap();
     let logged = dir.join("logged");
-    host_train::import::run(&host_train::import::ImportArgs {
+    host_train::data::import::run(&host_train::data::import::ImportArgs {
         motor_tau_s: None,
         ..import_args(&logged, &log)
     })

@@ -194,23 +194,20 @@ pub fn named(name: &str, weights: Option<&Bound<'_, PyAny>>) -> PyResult<(AnyMod
         _ => {
             return Err(PyValueError::new_err(format!(
                 "unknown controller {name:?}: expected one of {}",
-                CORE_NAMES.join(", ")
+                core_names().join(", ")
             )))
         }
     })
 }
 
-/// The names [`named`] knows.
-pub const CORE_NAMES: &[&str] = &[
-    "adaptive",
-    "adaptive-gradient",
-    "adaptive-composite",
-    "learned",
-    "geometric-adaptive",
-    "geometric-adaptive-gradient",
-    "geometric-adaptive-composite",
-    "ida-pbc",
-];
+/// The names [`named`] knows: the host registry's core controllers
+/// ([`host_train::control::registry::CORE_CONTROLLERS`]).
+pub fn core_names() -> Vec<&'static str> {
+    host_train::control::registry::CORE_CONTROLLERS
+        .iter()
+        .map(|(n, _)| *n)
+        .collect()
+}
 
 /// A setpoint: desired position and its derivatives (world frame) and yaw.
 #[pyclass(module = "hamflight._core", frozen, skip_from_py_object)]

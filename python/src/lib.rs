@@ -22,7 +22,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<controller::Faults>()?;
     m.add_class::<blob::Blob>()?;
     m.add("BlobError", py.get_type::<blob::BlobError>())?;
-    m.add("CONTROLLER_NAMES", controller::CORE_NAMES.to_vec())?;
+    m.add("CONTROLLER_NAMES", controller::core_names())?;
     m.add("GAIN_KEYWORDS", controller::GAIN_KEYS.to_vec())?;
     m.add("BLOB_HEADER_LEN", blob::LAYOUT.0)?;
     m.add("BLOB_CRC_LEN", blob::LAYOUT.1)?;

@@ -4,16 +4,17 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use host_train::controller::Controller as HostController;
-use host_train::eval::{self, FlightLog, Report};
-use host_train::flight::{self, CoreController};
-use host_train::scenario::{Scenario as HostScenario, ScenarioSpec};
+use host_train::control::adapter::CoreController;
+use host_train::control::controller::Controller as HostController;
+use host_train::control::registry;
+use host_train::fly::eval::{self, FlightLog, Report};
+use host_train::sim::scenario::{Scenario as HostScenario, ScenarioSpec};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::controller::{named, AnyModel, Controller, CORE_NAMES};
+use crate::controller::{core_names, named, AnyModel, Controller};
 
 fn err(e: anyhow::Error) -> PyErr {
     PyValueError::new_err(format!("{e:#}"))
@@ -133,7 +134,7 @@ enum Pilot {
 /// One flight, without the GIL.
 fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> {
     let mut ctrl: Box<dyn HostController> = match pilot {
-        Pilot::Baseline(name) => host_train::baselines::by_name(name, scenario)?,
+        Pilot::Baseline(name) => host_train::control::registry::baseline_by_name(name, scenario)?,
         Pilot::Core(name, model, gains) => {
             Box::new(CoreController::new(name, model.clone(), *gains))
         }
@@ -239,7 +240,7 @@ pub fn fly(
         let name: String = controller.extract().map_err(|_| {
             PyTypeError::new_err("controller: expected a name or a hamflight.Controller")
         })?;
-        if CORE_NAMES.contains(&name.as_str()) {
+        if core_names().contains(&name.as_str()) {
             let (model, gains) = named(&name, weights)?;
             Pilot::Core(name, model, gains)
         } else {
@@ -250,26 +251,19 @@ pub fn fly(
     result(py, &log, &sc)
 }
 
-/// The registry's names, with a line each.
+/// The registry's names, with a line each ([`registry::controllers`]).
 #[pyfunction]
 pub fn controllers() -> Vec<(String, String)> {
-    let mut v: Vec<(String, String)> = flight::CORE_CONTROLLERS
-        .iter()
+    registry::controllers()
         .map(|(n, d)| (n.to_string(), d.to_string()))
-        .collect();
-    v.push(("pid".into(), "the DSL PID of gym-pybullet-drones".into()));
-    v.push((
-        "geometric".into(),
-        "Lee et al. on the true constants".into(),
-    ));
-    v
+        .collect()
 }
 
 #[derive(Parser)]
 #[command(name = "host-train")]
 enum Tool {
-    Collect(host_train::collect::CollectArgs),
-    Import(host_train::import::ImportArgs),
+    Collect(host_train::data::collect::CollectArgs),
+    Import(host_train::data::import::ImportArgs),
     Train(host_train::train::TrainArgs),
 }
 
@@ -282,9 +276,9 @@ pub fn run_tool(py: Python<'_>, command: &str, argv: Vec<String>) -> PyResult<St
     let tool = Tool::try_parse_from(&full).map_err(|e| PyValueError::new_err(e.to_string()))?;
     py.detach(|| -> anyhow::Result<String> {
         Ok(match tool {
-            Tool::Collect(a) => serde_json::to_string(&host_train::collect::run(&a)?)?,
-            Tool::Import(a) => serde_json::to_string(&host_train::import::run(&a)?)?,
-            Tool::Train(a) => serde_json::to_string(&host_train::train::run_cli(&a)?)?,
+            Tool::Collect(a) => serde_json::to_string(&host_train::data::collect::run(&a)?)?,
+            Tool::Import(a) => serde_json::to_string(&host_train::data::import::run(&a)?)?,
+            Tool::Train(a) => serde_json::to_string(&host_train::pipeline::train::run_cli(&a)?)?,
         })
     })
     .map_err(err)

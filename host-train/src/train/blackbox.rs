@@ -12,8 +12,8 @@
 //! predicted R first projected to the nearest rotation; ‖RᵀR − I‖ is reported alongside.
 
 use super::data::{self, Batch, StateBatch, Windows};
-use super::model::{to_vec, window_loss, TMlp};
 use super::r#loop::Adam;
+use super::tensor_model::{to_vec, window_loss, TMlp};
 use super::TrainConfig;
 use anyhow::Result;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -23,7 +23,7 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// Hidden width of the black-box MLP: with 27 inputs and 18 outputs, 32 gives 2546 parameters
@@ -392,7 +392,7 @@ fn evaluate(
 }
 
 /// The data-efficiency comparison at each of `fractions` of the training windows: the structured
-/// model ([`super::run`], weights written under the system temp directory) and the black box, both
+/// model ([`super::fit`]: trained only, nothing flown or written) and the black box, both
 /// with `epochs` epochs, batch 128, seed 0 and the default held-out split.
 ///
 /// # Errors
@@ -406,7 +406,6 @@ pub fn compare(data_dir: &Path, fractions: &[f64], epochs: usize) -> Result<Vec<
     };
     let windows = data::load(data_dir, cfg.window)?;
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
-    let out_dir: PathBuf = std::env::temp_dir().join("hamflight-blackbox-compare");
     let mut rows = Vec::with_capacity(fractions.len());
     for &frac in fractions {
         let ids = data::subset(&windows, &train_ids, frac);
@@ -422,8 +421,8 @@ pub fn compare(data_dir: &Path, fractions: &[f64], epochs: usize) -> Result<Vec<
             data_frac: frac,
             ..cfg.clone()
         };
-        let out = out_dir.join(format!("structured_frac{frac}.hfw"));
-        let rep = super::run(&scfg, data_dir, &out, true)?;
+        // Trained only: the comparison is on held-out prediction, nothing is flown or written.
+        let rep = super::fit(&scfg, data_dir, true)?.report;
         let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
         let h = &rep.heldout_learned;
         eprintln!(

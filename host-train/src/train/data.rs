@@ -1,9 +1,9 @@
-//! Training windows: a dataset (format `hamflight-dataset-v2`, read by [`crate::dataset`]) cut
+//! Training windows: a dataset (format `hamflight-dataset-v2`, read by [`crate::io::dataset`]) cut
 //! into windows of `len` states every `stride` samples, each with the command of every step and
 //! its realization index, a deterministic held-out split, and the batch tensors the burn model
 //! consumes.
 
-use crate::dataset::{self, WindowSpec};
+use crate::io::dataset::{self, WindowSpec};
 use anyhow::{bail, Result};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::State;

@@ -2,7 +2,7 @@
 //! file) and the JSON report next to it (`FILE.hfw.json`): configuration, training curve,
 //! held-out N-step prediction errors of the learned and nominal models, the learned J (hover)
 //! and g against the true ones, and the a_j with the true disturbances of their realizations.
-//! The "true" values are the dataset manifest's vehicle ([`crate::dataset::VehicleDescription`]
+//! The "true" values are the dataset manifest's vehicle ([`crate::io::dataset::VehicleDescription`]
 //! and `mass_kg`): the inertia is omitted (null) when the manifest does not give it, and the
 //! true g assumes nominal rotors when it gives no rotor efficiencies.
 
@@ -19,7 +19,7 @@ use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
 use std::path::Path;
 
-pub use crate::fsutil::write_atomic;
+pub use crate::io::files::write_atomic;
 
 /// Root-mean-square prediction errors at each predicted step of the held-out windows.
 #[derive(Clone, Debug, Serialize)]
@@ -110,8 +110,8 @@ pub struct TrainReport {
     /// The motor time constant written into the blob (s): what the composite law's prediction
     /// assumes (`--motor-tau-s`, else the manifest's, else 0.05 s).
     pub blob_motor_tau_s: f32,
-    /// The SITL flight check before writing ([`super::check`]); null when skipped.
-    pub flight_check: Option<super::check::FlightCheck>,
+    /// The SITL flight check before writing ([`crate::pipeline::train`]); null when skipped.
+    pub flight_check: Option<FlightCheck>,
     /// Learned J at hover (R = I), kg·m², row-major.
     pub learned_inertia_hover_kg_m2: [[f32; 3]; 3],
     /// The true J (kg·m²), from the manifest (null when it gives none).
@@ -397,4 +397,50 @@ pub fn write(out: &Path, model: &LearnedModel, report: &TrainReport) -> Result<(
     json_path.push(".json");
     let json = serde_json::to_vec_pretty(report)?;
     write_atomic(Path::new(&json_path), &json)
+}
+
+/// One flight of the check.
+#[derive(Clone, Debug, Serialize)]
+pub struct CheckFlight {
+    /// The check scenario's name ([`crate::pipeline::check::CHECK_SCENARIOS`]).
+    pub scenario: String,
+    /// `none` (adaptation off), `gradient` or `composite`.
+    pub law: String,
+    /// RMSE over t ≥ 5 s (m), or `None` if it crashed before.
+    pub rmse_m: Option<f64>,
+    /// Crash time (s), if any.
+    pub crash_s: Option<f64>,
+}
+
+/// What the check flew and found; saved in the training report.
+#[derive(Clone, Debug, Serialize)]
+pub struct FlightCheck {
+    /// The check scenarios' description.
+    pub scenario: String,
+    /// The gradient law on the windy spiral: RMSE over t ≥ 5 s (m), or `None` if it crashed.
+    pub adaptive_rmse_m: Option<f64>,
+    /// The gradient law on the windy spiral: crash time (s), if any.
+    pub adaptive_crash_s: Option<f64>,
+    /// Without adaptation on the windy spiral: RMSE over t ≥ 5 s (m).
+    pub learned_rmse_m: Option<f64>,
+    /// Without adaptation on the windy spiral: crash time (s), if any.
+    pub learned_crash_s: Option<f64>,
+    /// Every flight: each scenario without adaptation and under both laws.
+    pub flights: Vec<CheckFlight>,
+    /// Why it failed, or `None` if it passed.
+    pub failure: Option<String>,
+}
+
+impl FlightCheck {
+    /// True if the blob may be written.
+    pub fn passed(&self) -> bool {
+        self.failure.is_none()
+    }
+
+    /// The flight of `law` on `scenario`.
+    pub fn flight(&self, scenario: &str, law: &str) -> Option<&CheckFlight> {
+        self.flights
+            .iter()
+            .find(|f| f.scenario == scenario && f.law == law)
+    }
 }

@@ -4,11 +4,11 @@
 
 use super::data::StateBatch;
 use super::data::{self, Batch, Windows};
-use super::model::{
+use super::tensor_model::{
     rk4_with, to_phase_with, to_vec, velocities_with, window_loss, Consts, Forcing, FusedHeads,
     TModel,
 };
-use super::TrainConfig;
+use super::{GradientPath, TrainConfig};
 use burn::tensor::{Device, Tensor, TensorData};
 use hamflight::model::{ModelWeights, FEATURES};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -16,6 +16,7 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// One epoch of the training curve.
@@ -278,8 +279,10 @@ struct Trainer<'a> {
     /// Tensors frozen (no gradient, no step): the J⁻¹ and g heads in the feature stage.
     frozen: Vec<bool>,
     /// Take the loss and gradients from the hand-fused kernel ([`super::fused`]) instead of
-    /// burn's autodiff (default; `HAMFLIGHT_TRAIN_BURN=1` selects burn).
+    /// burn's autodiff: [`TrainConfig::gradient`] is [`GradientPath::Fused`].
     fused: bool,
+    /// Set once the fused kernel has declined a shape and burn stood in (warned once).
+    fused_declined: AtomicBool,
 }
 
 impl Trainer<'_> {
@@ -359,6 +362,15 @@ impl Trainer<'_> {
         if self.fused && !self.reference {
             if let Some(s) = self.fused_loss_and_grads(ids, cores) {
                 return s;
+            }
+            if !self.fused_declined.swap(true, Ordering::Relaxed) {
+                eprintln!(
+                    "warning: the fused gradient kernel declines these shapes (hidden {}, \
+                     features {}, per-flight width {}); training with burn's autodiff instead",
+                    self.cfg.hidden,
+                    self.cfg.features,
+                    self.params[self.n_net].dims()[1]
+                );
             }
         }
         if cores < 2 || ids.len() < SHARD_MIN_BATCH || self.reference {
@@ -462,8 +474,8 @@ impl<'a> Trainer<'a> {
             a_mask,
             reference: false,
             frozen: vec![false; n_net + 1],
-            fused: std::env::var_os("HAMFLIGHT_TRAIN_BURN")
-                .is_none_or(|v| v.is_empty() || v == "0"),
+            fused: cfg.gradient == GradientPath::Fused,
+            fused_declined: AtomicBool::new(false),
         }
     }
 }

@@ -3,23 +3,39 @@
 //! realization, by RK4 through each window and Adam on the TSE(3) loss ℓ_p + ℓ_R + ℓ_ζ.
 //!
 //! - [`data`]: the dataset's windows as tensors, the held-out split;
-//! - [`model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex + autodiff);
+//! - [`tensor_model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex +
+//!   autodiff);
 //! - [`r#loop`]: Adam, the epoch loop, the progress bar;
-//! - [`bench`]: `host-train bench-train`, seconds per epoch at several batch sizes;
 //! - [`blackbox`]: the black-box MLP baseline and the data-efficiency comparison;
 //! - [`fused`]: the loss and its exact gradient as one hand-fused f32 kernel, what training
-//!   runs (burn's autodiff of [`model`] is its reference);
+//!   runs (burn's autodiff of [`tensor_model`] is its reference);
 //! - [`export`]: the weight blob (temp file, then rename) and the `FILE.hfw.json` report.
+//!
+//! Training here flies nothing: the flight check before a blob is written, `host-train train`
+//! and `bench-train` are [`crate::pipeline`]'s.
+//!
+//! # Changing the model or the loss
+//!
+//! The equations live in three places that must agree; change them in this order:
+//!
+//! 1. the tensor model ([`tensor_model`]): the networks, paper eq. 1–2, RK4 and the loss as burn
+//!    tensor ops, differentiated by burn's autodiff. It is the reference, and it must match the
+//!    core's f32 inference (`src/model/`) where the two overlap;
+//! 2. the fused kernel ([`fused`]): the same forward pass with its reverse pass written out by
+//!    hand (`fused/rhs.rs` for eq. 1, `fused/group.rs` for RK4 and the loss, `fused/point.rs`
+//!    and `fused/mlp.rs` for the heads). Until it is updated, train with
+//!    `--gradient burn` ([`GradientPath::Burn`]);
+//! 3. the parity test (`host-train/tests/train_parity.rs`): the core's inference against the
+//!    tensor model, and the fused kernel's loss and gradients against burn's. It must pass
+//!    before the fused path is trusted again.
 
-pub mod bench;
 pub mod blackbox;
-pub mod check;
 pub mod data;
 pub mod export;
 pub mod fused;
 #[path = "loop.rs"]
 pub mod r#loop;
-pub mod model;
+pub mod tensor_model;
 
 use anyhow::{bail, Result};
 use hamflight::model::{FEATURES, HIDDEN};
@@ -27,6 +43,30 @@ use serde::Serialize;
 use std::path::Path;
 
 pub use export::TrainReport;
+
+/// Where the training loss's gradient comes from. Recorded in [`TrainConfig::gradient`] and so in
+/// the training report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum GradientPath {
+    /// The hand-fused f32 kernel ([`fused`]); where it declines a shape, burn's autodiff, with a
+    /// warning.
+    #[default]
+    Fused,
+    /// burn's autodiff of [`tensor_model`]'s equations (the reference the kernel is tested
+    /// against; slower).
+    Burn,
+}
+
+impl GradientPath {
+    /// The environment's override: `HAMFLIGHT_TRAIN_BURN` set and neither empty nor `0`
+    /// selects [`GradientPath::Burn`]; else `None`.
+    pub fn from_env() -> Option<Self> {
+        std::env::var_os("HAMFLIGHT_TRAIN_BURN")
+            .filter(|v| !v.is_empty() && v != "0")
+            .map(|_| GradientPath::Burn)
+    }
+}
 
 /// Training settings. Saved in the report next to the weights they produced.
 #[derive(Clone, Debug, Serialize)]
@@ -71,7 +111,7 @@ pub struct TrainConfig {
     /// Number of disturbance features p; fixed by the core ([`FEATURES`]), checked here.
     pub features: usize,
     /// How windows are cut from the dataset's flights (default: 5 states every 4 samples).
-    pub window: crate::dataset::WindowSpec,
+    pub window: crate::io::dataset::WindowSpec,
     /// The vehicle's mass (kg), carried in the blob; `None` (default) takes the dataset
     /// manifest's `mass_kg`.
     pub mass_kg: Option<f64>,
@@ -84,7 +124,7 @@ pub struct TrainConfig {
     /// `adaptive` 0.046 cm after 3, 0.032 after 6, 0.022 after 12; docs/training.md).
     pub feature_epochs: usize,
     /// Fly the new blob in the SITL before writing it, and refuse to write one that crashes the
-    /// adaptive controller ([`check`]; default true).
+    /// adaptive controller ([`crate::pipeline::train`]; default true).
     pub flight_check: bool,
     /// The motors' first-order time constant (s) written into the blob, what the composite
     /// law's prediction assumes; `None` (default) takes the manifest's `vehicle.motor_tau_s`
@@ -96,6 +136,9 @@ pub struct TrainConfig {
     /// does, and trained freely they take up large spurious entries (see `docs/vehicles.md`).
     /// Held at zero during training instead, the rest of the model fits worse (measured there).
     pub zero_unactuated_gain_rows: bool,
+    /// Where the loss's gradient comes from (default [`GradientPath::Fused`], or
+    /// [`GradientPath::Burn`] when `HAMFLIGHT_TRAIN_BURN` overrides it: [`GradientPath::from_env`]).
+    pub gradient: GradientPath,
 }
 
 impl Default for TrainConfig {
@@ -115,23 +158,37 @@ impl Default for TrainConfig {
             init_out_gain: 0.05,
             hidden: HIDDEN,
             features: FEATURES,
-            window: crate::dataset::WindowSpec::default(),
+            window: crate::io::dataset::WindowSpec::default(),
             mass_kg: None,
             flight_rotor_gains: true,
             feature_epochs: 12,
             flight_check: true,
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
+            gradient: GradientPath::from_env().unwrap_or_default(),
         }
     }
 }
 
-/// Trains on the dataset in `data_dir` and writes `out` (the blob) and `out.json` (the report).
+/// A trained model with its report, not yet checked in flight nor written.
+pub struct Fitted {
+    /// The model, as the blob will carry it.
+    pub model: hamflight::model::LearnedModel,
+    /// The training report (its `flight_check` not yet filled in).
+    pub report: TrainReport,
+    /// The dataset manifest's vehicle mass (kg).
+    pub manifest_mass_kg: f64,
+    /// The vehicle the dataset describes.
+    pub vehicle: crate::io::dataset::VehicleDescription,
+}
+
+/// Trains on the dataset in `data_dir` (the flight check and the writing of the blob are
+/// [`crate::pipeline::train::run`]'s).
 ///
 /// # Errors
-/// A dataset that cannot be read, a `hidden`/`features` other than the core's compile-time
-/// sizes, or a failure writing the outputs.
-pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Result<TrainReport> {
+/// A dataset that cannot be read, or a `hidden`/`features` other than the core's compile-time
+/// sizes.
+pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     if cfg.hidden != HIDDEN || cfg.features != FEATURES {
         bail!(
             "--hidden {} / --features {}: the core is compiled for HIDDEN = {HIDDEN}, FEATURES = \
@@ -178,18 +235,18 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
     let model = hamflight::model::LearnedModel::new(trained.weights).with_motor_tau_s(tau);
     let mut report = export::report(cfg, &windows, &train_ids, &heldout, &trained);
     report.blob_motor_tau_s = tau;
-    if cfg.flight_check {
-        let mass = f64::from(windows.manifest_mass_kg);
-        report.flight_check = Some(check::require(&model, mass, &windows.vehicle)?);
-    }
-    export::write(out, &model, &report)?;
-    Ok(report)
+    Ok(Fitted {
+        model,
+        report,
+        manifest_mass_kg: f64::from(windows.manifest_mass_kg),
+        vehicle: windows.vehicle.clone(),
+    })
 }
 
 /// The motor lag the blob carries: `--motor-tau-s`, else the manifest's, else the default.
 fn blob_motor_tau_s(
     cfg: &TrainConfig,
-    vehicle: &crate::dataset::VehicleDescription,
+    vehicle: &crate::io::dataset::VehicleDescription,
 ) -> Result<f32> {
     let tau = cfg
         .motor_tau_s
@@ -202,7 +259,7 @@ fn blob_motor_tau_s(
     Ok(tau)
 }
 
-/// `host-train train`: the command-line face of [`run`].
+/// `host-train train`: the command-line face of [`crate::pipeline::train::run`].
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
     /// Dataset directory written by `host-train collect` or `host-train import`.
@@ -251,11 +308,11 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = TrainConfig::default().feature_decay)]
     pub feature_decay: f64,
     /// States per training window (N + 1 in the paper's notation).
-    #[arg(long, default_value_t = crate::dataset::WindowSpec::default().len)]
+    #[arg(long, default_value_t = crate::io::dataset::WindowSpec::default().len)]
     pub window_len: usize,
     /// Samples between the starts of consecutive windows (4 with `collect`'s defaults: one held
     /// command per window; 1 uses every sample as a start).
-    #[arg(long, default_value_t = crate::dataset::WindowSpec::default().stride)]
+    #[arg(long, default_value_t = crate::io::dataset::WindowSpec::default().stride)]
     pub stride: usize,
     /// The vehicle's mass (kg), written into the blob: the controller's gains and the model's
     /// M = diag(m I, J) use it. Default: the dataset manifest's `mass_kg` (what `collect` flew,
@@ -290,6 +347,10 @@ pub struct TrainArgs {
     /// prediction turns into force errors at every attitude manoeuvre.
     #[arg(long)]
     pub free_gain: bool,
+    /// Where the loss's gradient comes from: `fused` (the hand-fused kernel) or `burn` (burn's
+    /// autodiff, the reference). Default: fused, or burn when `HAMFLIGHT_TRAIN_BURN=1`.
+    #[arg(long, value_enum, value_name = "PATH")]
+    pub gradient: Option<GradientPath>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -311,7 +372,7 @@ impl TrainArgs {
             feature_decay: self.feature_decay,
             warmup_epochs: self.warmup_epochs,
             patience: self.patience,
-            window: crate::dataset::WindowSpec {
+            window: crate::io::dataset::WindowSpec {
                 len: self.window_len,
                 stride: self.stride,
             },
@@ -321,87 +382,12 @@ impl TrainArgs {
             flight_check: !self.no_flight_check,
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
+            gradient: self
+                .gradient
+                .unwrap_or_else(|| TrainConfig::default().gradient),
             ..TrainConfig::default()
         }
     }
-}
-
-/// Runs `host-train train` and prints a summary.
-///
-/// # Errors
-/// As [`run`].
-pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
-    let r = run(&args.config(), &args.data, &args.out, args.quiet)?;
-    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
-    println!(
-        "trained {} epochs on {} windows in {:.0} s: held-out loss {:.3e} -> {:.3e}",
-        r.curve.len(),
-        r.train_windows,
-        r.train_time_s,
-        r.initial_val_loss,
-        r.final_val_loss
-    );
-    let errs = |e: &export::PredictionErrors| {
-        format!(
-            "{:.2e} / {:.2e} / {:.2e} / {:.2e}",
-            last(&e.pos_m),
-            last(&e.rot_rad),
-            last(&e.vel_m_s),
-            last(&e.rate_rad_s)
-        )
-    };
-    println!(
-        "held-out {}-step error (pos m / rot rad / vel m/s / rate rad/s): learned {}, nominal {}",
-        r.heldout_learned.pos_m.len(),
-        errs(&r.heldout_learned),
-        errs(&r.heldout_nominal),
-    );
-    if let Some(n) = &r.heldout_nominal_true_vehicle {
-        println!(
-            "held-out {}-step error of the nominal model with the dataset's mass and inertia: {}",
-            n.pos_m.len(),
-            errs(n),
-        );
-    }
-    if let Some(c) = &r.heldout_calm {
-        println!(
-            "held-out {}-step error on the {} windows of disturbance-free flights: learned {}, nominal {}",
-            c.learned.pos_m.len(),
-            c.windows,
-            errs(&c.learned),
-            errs(&c.nominal),
-        );
-    }
-    if let Some(c) = &r.flight_check {
-        let cm = |v: Option<f64>| v.map_or("—".into(), |m| format!("{:.2} cm", 100.0 * m));
-        let cells: Vec<String> = check::CHECK_SCENARIOS
-            .iter()
-            .map(|(name, _)| {
-                let of = |law: &str| {
-                    c.flight(name, law).map_or("—".into(), |f| match f.crash_s {
-                        Some(t) => format!("crash {t:.1} s"),
-                        None => cm(f.rmse_m),
-                    })
-                };
-                format!(
-                    "{name}: gradient {}, composite {}, without adaptation {}",
-                    of("gradient"),
-                    of("composite"),
-                    of("none")
-                )
-            })
-            .collect();
-        println!(
-            "flight check (SITL, the dataset's vehicle, 8 s): {}: passed",
-            cells.join("; ")
-        );
-    }
-    println!(
-        "wrote {} and {}.json",
-        args.out.display(),
-        args.out.display()
-    );
-    Ok(r)
 }
 
 /// Changes the trained features to the basis in which they equal the nominal ones at hover

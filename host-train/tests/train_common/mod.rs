@@ -1,12 +1,12 @@
 //! Shared helpers of the training tests: random states and a synthetic dataset written through
-//! `host_train::dataset` (format `hamflight-dataset-v2`) from a known model.
+//! `host_train::io::dataset` (format `hamflight-dataset-v2`) from a known model.
 #![allow(dead_code)]
 
 use hamflight::model::{rk4_step, HamiltonianModel, State, FEATURES, GRAVITY_M_S2, MASS_KG};
-use host_train::dataset::{
+use host_train::io::dataset::{
     realization_file, save, Dataset, Flight, Realization, RealizationMeta, Sample,
 };
-use host_train::PlantState;
+use host_train::sim::plant::PlantState;
 use nalgebra::{Vector3, Vector4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

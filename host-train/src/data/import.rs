@@ -1,0 +1,619 @@
+//! `host-train import`: flight logs in, a dataset ([`crate::io::dataset`]) out.
+//!
+//! Each input file becomes one realization (one a_j in training); `--calm FILE` imports a file
+//! marked disturbance-free (a_j pinned to 0). Two sources:
+//!
+//! # (a) Bitcraze uSD-card deck logs ([`crate::io::usdlog`])
+//!
+//! The `fixedFrequency` event must hold these variables (`tools/usd/config.txt` logs them):
+//! `stateEstimate.x/y/z` (m, world), `stateEstimate.vx/vy/vz` (m/s, **world**),
+//! `stateEstimate.qx/qy/qz/qw` (attitude, body → world), `gyro.x/y/z` (deg/s, body) and the
+//! commanded wrench, by default Bitcraze's Lee controller's `ctrlLee.thrustSi` (N) and
+//! `ctrlLee.torquex/y/z` (N·m) (`--command-vars` names others, for example our Crazyflie app's).
+//! `acc.x/y/z` (g, body specific force) is optional. Conversions: R from the normalised
+//! quaternion, v_body = Rᵀ v_world, ω = gyro · π/180, acc · 9.81 m/s². Other event types are
+//! skipped and counted.
+//!
+//! # (b) CSV of time-stamped states and commanded wrench
+//!
+//! A header line with (at least) these columns, in any order, SI units:
+//!
+//! ```text
+//! t_s,px_m,py_m,pz_m,qw,qx,qy,qz,vx_world_m_s,vy_world_m_s,vz_world_m_s,wx_rad_s,wy_rad_s,wz_rad_s,f_n,tau_x_nm,tau_y_nm,tau_z_nm
+//! ```
+//!
+//! plus optionally `ax_m_s2,ay_m_s2,az_m_s2` (body specific force). One row per state sample:
+//! time (s), world position, attitude quaternion (body → world, any sign, normalised on
+//! import), **world** velocity, **body** angular rate, and the commanded thrust and body torques
+//! in force from that sample on. Extra columns are ignored.
+//!
+//! # Rates and resampling
+//!
+//! States are never interpolated: the dataset keeps each log's own sample times, and its rate is
+//! the median sample interval of the first input (every input must agree within 10 %). Where
+//! the command is logged at another rate than the state (CSV rows with empty command cells),
+//! the last command is held (zero-order hold, as the motors hold it); rows before the first
+//! command are dropped.
+//!
+//! # Motor dynamics (`--motor-tau-s T`)
+//!
+//! The log holds the *commanded* wrench; with motor lag the rotors realize it only after a
+//! delay, and a model trained on the commanded wrench takes up the lag elsewhere (on the heavy
+//! vehicle of docs/vehicles.md it learned a J 5× too large). With `--motor-tau-s T` the importer
+//! turns each logged command into the realized one the trainer integrates. The log has no motor
+//! outputs, so the wrench is taken apart per rotor through the CF2X mixer inverse (squared rotor
+//! speeds ωᵢ², as [`crate::sim::plant::VehicleParams::wrench_to_rpm_squared`]), each rotor speed follows
+//! the commanded one through the first-order lag ω̇ᵢ = (ωᵢ,cmd − ωᵢ)/T from sample to sample
+//! (exactly, the command held between samples), and the stored wrench is that of the step's
+//! mean ωᵢ² (exact for the lag). The filter starts at each continuous stretch's first command
+//! (the rotors at steady state) and runs over every decoded sample before the airborne rule
+//! picks flights, so take-off's transient is outside the kept data. The manifest's
+//! `vehicle.motor_tau_s` records T. `--inertia-kg-m2` and `--rotor-efficiency` describe the
+//! vehicle further for the training report's "true" values (nothing else uses them).
+//!
+//! # Ground, take-off and landing
+//!
+//! A sample is airborne when `z ≥ --min-height-m` (default 0.10 m above the floor, z = 0) and
+//! the commanded thrust is at least `--min-thrust-frac` (default 0.25) of m g. Each continuous
+//! airborne stretch (split at gaps and non-increasing timestamps as in
+//! [`crate::io::dataset::segments`]) loses `--trim-s` (default 0.5 s) at both ends, where take-off
+//! and landing transients, ground contact and ground effect act; what remains becomes one
+//! flight of the dataset. Stretches shorter than that are dropped.
+//!
+//! Bad input gets an error naming the file and the byte offset (uSD) or line (CSV); all inputs
+//! are decoded before anything is written, and every file is written whole.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde::Deserialize;
+
+use crate::io::dataset::{self, Dataset, Flight, Realization, RealizationMeta, Sample};
+use crate::io::usdlog::{
+    self, ParseOptions, G0_M_S2, LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS,
+};
+use crate::sim::plant::{PlantState, VehicleParams};
+
+/// Input format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    /// By content: a first byte 0xBC is a uSD log, anything else CSV.
+    Auto,
+    /// Bitcraze uSD-card deck binary log.
+    Usd,
+    /// The documented CSV.
+    Csv,
+}
+
+/// Arguments of `host-train import`.
+#[derive(Args, Clone, Debug)]
+pub struct ImportArgs {
+    /// Output dataset directory (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Flight logs, one realization (one a_j) each.
+    #[arg(value_name = "LOG")]
+    pub logs: Vec<PathBuf>,
+    /// Flight logs flown without disturbance (their a_j is pinned to 0 in training). Takes every
+    /// log that follows it up to the next option (`--calm C1 C2`), and may be repeated; give the
+    /// disturbed logs before it.
+    #[arg(long, value_name = "LOG", num_args = 1..)]
+    pub calm: Vec<PathBuf>,
+    /// Input format.
+    #[arg(long, value_enum, default_value_t = LogFormat::Auto)]
+    pub format: LogFormat,
+    /// Vehicle mass (kg), written to the manifest and used by the thrust rule. Required: neither
+    /// log format carries it, and a wrong mass scales every force the model learns (the stock
+    /// Crazyflie 2.1 is 0.027).
+    #[arg(long, required = true)]
+    pub mass_kg: f64,
+    /// Gravity (m/s²).
+    #[arg(long, default_value_t = 9.8)]
+    pub gravity_m_s2: f64,
+    /// Vehicle inertia diag(J) (kg·m²), comma-separated; for the training report only.
+    #[arg(long, value_delimiter = ',', value_name = "JX,JY,JZ")]
+    pub inertia_kg_m2: Option<Vec<f64>>,
+    /// The vehicle's own rotor thrust factors δ₁..δ₄, when known; for the training report only.
+    #[arg(long, value_delimiter = ',', value_name = "D1,D2,D3,D4")]
+    pub rotor_efficiency: Option<Vec<f64>>,
+    /// First-order motor time constant (s): store the realized command (the logged one through
+    /// the motor lag, per rotor) instead of the logged one; see the module docs.
+    #[arg(long, value_name = "T")]
+    pub motor_tau_s: Option<f64>,
+    /// uSD variables of the commanded thrust (N) and body torques (N·m), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = LEE_COMMAND_VARS.map(String::from))]
+    pub command_vars: Vec<String>,
+    /// Airborne only at or above this height (m, world z).
+    #[arg(long, default_value_t = 0.10)]
+    pub min_height_m: f64,
+    /// Airborne only with a commanded thrust of at least this fraction of m g.
+    #[arg(long, default_value_t = 0.25)]
+    pub min_thrust_frac: f64,
+    /// Seconds cut from both ends of every airborne stretch (take-off, landing).
+    #[arg(long, default_value_t = 0.5)]
+    pub trim_s: f64,
+    /// Decode uSD logs whose CRC does not match (for example cut short by a power loss).
+    #[arg(long)]
+    pub allow_bad_crc: bool,
+}
+
+/// What the import of one file found.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FileSummary {
+    /// The input file.
+    pub file: String,
+    /// Samples decoded.
+    pub samples_in: usize,
+    /// Samples kept (airborne, trimmed).
+    pub samples_kept: usize,
+    /// Flights written.
+    pub flights: usize,
+    /// Events of other types skipped (uSD).
+    pub skipped_events: usize,
+    /// The CRC matched (uSD; true for CSV).
+    pub crc_ok: bool,
+    /// Marked disturbance-free.
+    pub disturbance_free: bool,
+}
+
+/// Decoded samples of one log, in file order, with what was skipped.
+#[derive(Clone, Debug, Default)]
+pub struct Decoded {
+    /// The samples.
+    pub samples: Vec<Sample>,
+    /// Events of other types skipped.
+    pub skipped_events: usize,
+    /// CRC matched.
+    pub crc_ok: bool,
+}
+
+fn state_from(
+    p: [f64; 3],
+    q_xyzw: [f64; 4],
+    v_world: [f64; 3],
+    w_body: [f64; 3],
+) -> Option<PlantState> {
+    let q = Quaternion::new(q_xyzw[3], q_xyzw[0], q_xyzw[1], q_xyzw[2]);
+    let n = q.norm();
+    if !(n.is_finite() && (0.5..=1.5).contains(&n)) {
+        return None;
+    }
+    let rot = UnitQuaternion::from_quaternion(q)
+        .to_rotation_matrix()
+        .into_inner();
+    Some(PlantState {
+        p_m: Vector3::from(p),
+        rot,
+        v_body_m_s: rot.transpose() * Vector3::from(v_world),
+        w_body_rad_s: Vector3::from(w_body),
+    })
+}
+
+/// Decodes a uSD log's fixed-frequency samples.
+///
+/// # Errors
+/// The decoder's errors (with the byte offset), a missing `fixedFrequency` event type or
+/// variable, a quaternion far from unit norm or a non-finite value (with the event's offset);
+/// the error names `path`.
+pub fn decode_usd(
+    path: &Path,
+    bytes: &[u8],
+    command_vars: &[String],
+    opts: ParseOptions,
+) -> Result<Decoded> {
+    let (log, rep) =
+        usdlog::parse(bytes, opts).map_err(|e| anyhow::anyhow!("`{}`: {e}", path.display()))?;
+    let Some(ff) = log.fixed_frequency() else {
+        bail!(
+            "`{}`: no `{}` event type in the header (log the variables of tools/usd/config.txt)",
+            path.display(),
+            usdlog::FIXED_FREQUENCY_NAME
+        );
+    };
+    let et = &log.event_types[ff];
+    if command_vars.len() != 4 {
+        bail!(
+            "--command-vars needs 4 names (thrust, torque x, y, z), got {}",
+            command_vars.len()
+        );
+    }
+    let want: Vec<&str> = USD_STATE_VARS
+        .iter()
+        .copied()
+        .chain(command_vars.iter().map(String::as_str))
+        .collect();
+    let missing: Vec<&str> = want
+        .iter()
+        .copied()
+        .filter(|n| et.var_index(n).is_none())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "`{}`: the `{}` event lacks {} (it has: {})",
+            path.display(),
+            et.name,
+            missing.join(", "),
+            et.vars
+                .iter()
+                .map(|v| v.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let idx: Vec<usize> = want.iter().filter_map(|n| et.var_index(n)).collect();
+    let acc_idx: Option<Vec<usize>> = USD_ACC_VARS.iter().map(|n| et.var_index(n)).collect();
+    let mut out = Decoded {
+        crc_ok: rep.crc_ok,
+        ..Decoded::default()
+    };
+    for ev in &log.events {
+        if ev.type_index != ff {
+            out.skipped_events += 1;
+            continue;
+        }
+        let v = |k: usize| {
+            idx.get(k)
+                .and_then(|&i| ev.values.get(i))
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        let deg = std::f64::consts::PI / 180.0;
+        let bad = |what: &str| anyhow::anyhow!("`{}`: byte {}: {what}", path.display(), ev.offset);
+        let state = state_from(
+            [v(0), v(1), v(2)],
+            [v(6), v(7), v(8), v(9)],
+            [v(3), v(4), v(5)],
+            [v(10) * deg, v(11) * deg, v(12) * deg],
+        )
+        .ok_or_else(|| bad("the attitude quaternion is not near unit norm"))?;
+        let s = Sample {
+            t_s: ev.timestamp_us as f64 * 1e-6,
+            state,
+            wrench: [v(13), v(14), v(15), v(16)],
+            rpm: None,
+            acc_body_m_s2: acc_idx.as_ref().map(|a| {
+                std::array::from_fn(|k| {
+                    a.get(k)
+                        .and_then(|&i| ev.values.get(i))
+                        .copied()
+                        .unwrap_or(f64::NAN)
+                        * G0_M_S2
+                })
+            }),
+        };
+        dataset::check_sample(&s).map_err(|e| bad(&e.to_string()))?;
+        out.samples.push(s);
+    }
+    Ok(out)
+}
+
+#[derive(Debug, Deserialize)]
+struct CsvRow {
+    t_s: f64,
+    px_m: f64,
+    py_m: f64,
+    pz_m: f64,
+    qw: f64,
+    qx: f64,
+    qy: f64,
+    qz: f64,
+    vx_world_m_s: f64,
+    vy_world_m_s: f64,
+    vz_world_m_s: f64,
+    wx_rad_s: f64,
+    wy_rad_s: f64,
+    wz_rad_s: f64,
+    f_n: Option<f64>,
+    tau_x_nm: Option<f64>,
+    tau_y_nm: Option<f64>,
+    tau_z_nm: Option<f64>,
+    #[serde(default)]
+    ax_m_s2: Option<f64>,
+    #[serde(default)]
+    ay_m_s2: Option<f64>,
+    #[serde(default)]
+    az_m_s2: Option<f64>,
+}
+
+/// Decodes the documented CSV (see the module docs).
+///
+/// # Errors
+/// Unreadable text, a missing column, a malformed or non-finite number, a quaternion far from
+/// unit norm, a command given in part; the error names `path` and the line.
+pub fn decode_csv(path: &Path, bytes: &[u8]) -> Result<Decoded> {
+    let mut rd = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(bytes);
+    let mut out = Decoded {
+        crc_ok: true,
+        ..Decoded::default()
+    };
+    let mut held: Option<[f64; 4]> = None;
+    for (i, rec) in rd.deserialize::<CsvRow>().enumerate() {
+        let r = match rec {
+            Ok(r) => r,
+            Err(e) => {
+                let line = e.position().map_or(i as u64 + 2, |p| p.line());
+                bail!("`{}` line {line}: {e}", path.display());
+            }
+        };
+        let ln = i + 2;
+        let bad = |what: &str| anyhow::anyhow!("`{}` line {ln}: {what}", path.display());
+        match (r.f_n, r.tau_x_nm, r.tau_y_nm, r.tau_z_nm) {
+            (Some(f), Some(x), Some(y), Some(z)) => held = Some([f, x, y, z]),
+            (None, None, None, None) => {}
+            _ => return Err(bad("give all of f_n, tau_x_nm, tau_y_nm, tau_z_nm or none")),
+        }
+        let Some(wrench) = held else { continue };
+        let acc = match (r.ax_m_s2, r.ay_m_s2, r.az_m_s2) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            (None, None, None) => None,
+            _ => return Err(bad("give all of ax_m_s2, ay_m_s2, az_m_s2 or none")),
+        };
+        let state = state_from(
+            [r.px_m, r.py_m, r.pz_m],
+            [r.qx, r.qy, r.qz, r.qw],
+            [r.vx_world_m_s, r.vy_world_m_s, r.vz_world_m_s],
+            [r.wx_rad_s, r.wy_rad_s, r.wz_rad_s],
+        )
+        .ok_or_else(|| bad("the attitude quaternion (qw, qx, qy, qz) is not near unit norm"))?;
+        let s = Sample {
+            t_s: r.t_s,
+            state,
+            wrench,
+            rpm: None,
+            acc_body_m_s2: acc,
+        };
+        dataset::check_sample(&s).map_err(|e| bad(&e.to_string()))?;
+        out.samples.push(s);
+    }
+    Ok(out)
+}
+
+/// The median sample interval (s) of `samples` over increasing steps.
+pub fn median_dt_s(samples: &[Sample]) -> Option<f64> {
+    let mut d: Vec<f64> = samples
+        .windows(2)
+        .map(|w| w[1].t_s - w[0].t_s)
+        .filter(|d| *d > 0.0)
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied()
+}
+
+/// Replaces each sample's commanded wrench by the realized one under a first-order motor lag of
+/// `tau_s` (module docs, "Motor dynamics"), stretch by stretch ([`dataset::segments`] at
+/// `sample_hz`); `params` gives the mixer (the CF2X's rotor geometry and coefficients).
+pub fn realize_commands(
+    samples: &mut [Sample],
+    sample_hz: f64,
+    tau_s: f64,
+    params: &VehicleParams,
+) {
+    if tau_s.is_nan() || tau_s <= 0.0 {
+        return;
+    }
+    let nominal_dt = 1.0 / sample_hz;
+    for seg in dataset::segments(samples, sample_hz) {
+        let seg = &mut samples[seg];
+        let cmd_of = |s: &Sample| {
+            params
+                .wrench_to_rpm_squared(s.wrench)
+                .map(|q| q.max(0.0).sqrt())
+        };
+        let Some(first) = seg.first() else { continue };
+        let mut rotor = cmd_of(first);
+        for k in 0..seg.len() {
+            let dt = seg
+                .get(k + 1)
+                .map_or(nominal_dt, |n| n.t_s - seg[k].t_s)
+                .max(0.0);
+            let c = cmd_of(&seg[k]);
+            let e1 = (-dt / tau_s).exp();
+            // Mean over the step of ω(t)² with ω(t) = c + (ω₀ − c) e^{−t/T}.
+            let (m1, m2) = if dt > 0.0 {
+                (
+                    tau_s / dt * (1.0 - e1),
+                    tau_s / (2.0 * dt) * (1.0 - e1 * e1),
+                )
+            } else {
+                (1.0, 1.0)
+            };
+            let mean_sq: [f64; 4] = std::array::from_fn(|i| {
+                let d = rotor[i] - c[i];
+                c[i] * c[i] + 2.0 * c[i] * d * m1 + d * d * m2
+            });
+            seg[k].wrench = params.wrench_of_rpm_squared(mean_sq);
+            rotor = std::array::from_fn(|i| c[i] + (rotor[i] - c[i]) * e1);
+        }
+    }
+}
+
+/// The airborne flights of `samples` by the documented rule (module docs), at `sample_hz`.
+pub fn airborne_flights(samples: &[Sample], sample_hz: f64, args: &ImportArgs) -> Vec<Flight> {
+    let weight = args.mass_kg * args.gravity_m_s2;
+    let airborne = |s: &Sample| {
+        s.state.p_m.z >= args.min_height_m && s.wrench[0] >= args.min_thrust_frac * weight
+    };
+    let mut flights = Vec::new();
+    for seg in dataset::segments(samples, sample_hz) {
+        let seg = &samples[seg];
+        let mut k = 0;
+        while k < seg.len() {
+            if !airborne(&seg[k]) {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < seg.len() && airborne(&seg[k]) {
+                k += 1;
+            }
+            let stretch = &seg[start..k];
+            let (t0, t1) = (
+                stretch[0].t_s + args.trim_s,
+                stretch[stretch.len() - 1].t_s - args.trim_s,
+            );
+            let kept: Vec<Sample> = stretch
+                .iter()
+                .filter(|s| s.t_s >= t0 - 1e-9 && s.t_s <= t1 + 1e-9)
+                .copied()
+                .collect();
+            if !kept.is_empty() {
+                flights.push(Flight { samples: kept });
+            }
+        }
+    }
+    flights
+}
+
+/// Reads and decodes one log in `format`.
+///
+/// # Errors
+/// An unreadable file or the decoders' errors.
+pub fn decode_file(path: &Path, args: &ImportArgs) -> Result<Decoded> {
+    let bytes =
+        std::fs::read(path).with_context(|| format!("cannot read log `{}`", path.display()))?;
+    let usd = match args.format {
+        LogFormat::Usd => true,
+        LogFormat::Csv => false,
+        LogFormat::Auto => bytes.first() == Some(&usdlog::MAGIC),
+    };
+    if usd {
+        decode_usd(
+            path,
+            &bytes,
+            &args.command_vars,
+            ParseOptions {
+                allow_bad_crc: args.allow_bad_crc,
+            },
+        )
+    } else {
+        decode_csv(path, &bytes)
+    }
+}
+
+/// Runs `host-train import`: decodes every log, then writes the dataset. Returns a summary per
+/// input file.
+///
+/// # Errors
+/// No input, bad settings, any decoding error, logs at different rates, a log with no airborne
+/// flight, or a failure writing (nothing is written before every input has decoded).
+pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
+    let inputs: Vec<(&PathBuf, bool)> = args
+        .logs
+        .iter()
+        .map(|p| (p, false))
+        .chain(args.calm.iter().map(|p| (p, true)))
+        .collect();
+    if inputs.is_empty() {
+        bail!("no logs given: host-train import --out DIR --mass-kg KG LOG... [--calm LOG...]");
+    }
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    if !positive(args.mass_kg) || !positive(args.gravity_m_s2) {
+        bail!("--mass-kg and --gravity-m-s2 must be positive");
+    }
+    if args
+        .motor_tau_s
+        .is_some_and(|t| !(t.is_finite() && t >= 0.0))
+    {
+        bail!("--motor-tau-s must be a time constant ≥ 0 s");
+    }
+    let inertia: Option<[f64; 3]> = match &args.inertia_kg_m2 {
+        None => None,
+        Some(j) => match <[f64; 3]>::try_from(j.as_slice()) {
+            Ok(j) if j.iter().all(|x| positive(*x)) => Some(j),
+            _ => bail!("--inertia-kg-m2 needs three positive moments (kg·m²), got {j:?}"),
+        },
+    };
+    let rotor_efficiency: Option<[f64; 4]> = match &args.rotor_efficiency {
+        None => None,
+        Some(d) => match <[f64; 4]>::try_from(d.as_slice()) {
+            Ok(d) if d.iter().all(|x| positive(*x) && *x <= 2.0) => Some(d),
+            _ => bail!("--rotor-efficiency needs four factors in (0, 2], got {d:?}"),
+        },
+    };
+    if !(args.trim_s.is_finite()
+        && args.trim_s >= 0.0
+        && args.min_height_m.is_finite()
+        && args.min_thrust_frac.is_finite())
+    {
+        bail!("--trim-s must be ≥ 0 and --min-height-m, --min-thrust-frac finite");
+    }
+    let mut decoded = Vec::with_capacity(inputs.len());
+    for (path, calm) in &inputs {
+        decoded.push((*path, *calm, decode_file(path, args)?));
+    }
+    let Some(dt) = decoded
+        .first()
+        .and_then(|(_, _, d)| median_dt_s(&d.samples))
+    else {
+        bail!("`{}`: fewer than two samples", inputs[0].0.display());
+    };
+    let sample_hz = 1.0 / dt;
+    let mut ds = Dataset::new(sample_hz, args.mass_kg, args.gravity_m_s2, "import");
+    let tau = args.motor_tau_s.filter(|t| *t > 0.0);
+    ds.manifest.vehicle = dataset::VehicleDescription {
+        inertia_kg_m2: inertia,
+        rotor_efficiency,
+        motor_tau_s: tau,
+    };
+    if let Some(tau) = tau {
+        let mixer = VehicleParams::cf2x();
+        for (_, _, d) in decoded.iter_mut() {
+            realize_commands(&mut d.samples, sample_hz, tau, &mixer);
+        }
+    }
+    let mut summaries = Vec::with_capacity(decoded.len());
+    for (j, (path, calm, d)) in decoded.iter().enumerate() {
+        let Some(dt_j) = median_dt_s(&d.samples) else {
+            bail!("`{}`: fewer than two samples", path.display());
+        };
+        if (dt_j - dt).abs() > dataset::DT_TOLERANCE * dt {
+            bail!(
+                "`{}`: sampled at {:.1} Hz, but `{}` at {sample_hz:.1} Hz; import logs of one rate \
+                 into one dataset",
+                path.display(),
+                1.0 / dt_j,
+                inputs[0].0.display()
+            );
+        }
+        let flights = airborne_flights(&d.samples, sample_hz, args);
+        if flights.is_empty() {
+            bail!(
+                "`{}`: no airborne samples (z ≥ {} m and thrust ≥ {} m g, {} s trimmed at both ends)",
+                path.display(),
+                args.min_height_m,
+                args.min_thrust_frac,
+                args.trim_s
+            );
+        }
+        summaries.push(FileSummary {
+            file: path.display().to_string(),
+            samples_in: d.samples.len(),
+            samples_kept: flights.iter().map(|f| f.samples.len()).sum(),
+            flights: flights.len(),
+            skipped_events: d.skipped_events,
+            crc_ok: d.crc_ok,
+            disturbance_free: *calm,
+        });
+        ds.realizations.push(Realization {
+            meta: RealizationMeta {
+                file: dataset::realization_file(j),
+                source_file: Some(path.display().to_string()),
+                wind_m_s2: None,
+                rotor_efficiency: None,
+                disturbance_free: *calm,
+                flights: 0,
+                samples: 0,
+            },
+            flights,
+        });
+    }
+    dataset::save(&args.out, &ds)?;
+    Ok(summaries)
+}

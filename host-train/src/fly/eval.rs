@@ -1,0 +1,387 @@
+//! Closed-loop evaluation: fly a scenario with a controller, log it, score it, plot it.
+//!
+//! # `report.json`
+//!
+//! | key | meaning |
+//! | --- | --- |
+//! | `scenario` | scenario name |
+//! | `scenario_file` | path of the scenario file (or null) |
+//! | `controller` | controller name |
+//! | `rmse_pos_m` | position RMSE over the whole flight (m) |
+//! | `rmse_pos_window_m` | position RMSE over t ≥ `window_start_s` (m; null if the flight ended before) |
+//! | `window_start_s` | start of the scoring window (5 s) |
+//! | `max_err_m` | largest position error (m) |
+//! | `final_err_m` | position error at the last logged tick (m) |
+//! | `crashed` | true if the error exceeded 1 m, z went below 0 or the state became non-finite |
+//! | `crash_time_s` | time of the crash (s) or null |
+//! | `duration_s` | simulated time actually flown (s) |
+//! | `planned_duration_s` | the scenario's duration (s) |
+//! | `control_hz`, `physics_hz` | controller rate and effective physics rate (Hz) |
+//! | `wall_s` | wall-clock time of the flight (s) |
+//! | `sim_speed` | simulated seconds per wall second |
+//! | `control_step_us` | mean wall time of one controller step on this host (µs) |
+//! | `events` | per disturbance event (rotor fault onset, wind step edge): `t_s`, `peak_err_m` (until the next event), `recovery_s` (until the error stays < 1 cm; null if never), `rmse_after_m` (over the 5 s after) |
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::control::controller::Controller;
+pub use crate::io::files::{write_atomic, write_json_atomic};
+pub use crate::io::flightlog::FlightLog;
+use crate::sim::plant::Plant;
+use crate::sim::scenario::Scenario;
+
+/// Position error (m) above which a flight counts as crashed.
+pub const CRASH_ERR_M: f64 = 1.0;
+/// Start of the scoring window (s): RMSE after the adaptation transient.
+pub const WINDOW_START_S: f64 = 5.0;
+
+/// Seed offset of the accelerometer's noise stream.
+const ACC_NOISE_STREAM: u64 = 0xACCE_1E20;
+
+/// Fly `scenario` with `ctrl` (which is reset first). Stops early on a crash.
+pub fn fly(scenario: &Scenario, ctrl: &mut dyn Controller) -> FlightLog {
+    fly_with_progress(scenario, ctrl, None)
+}
+
+/// [`fly`], ticking an optional progress bar once per simulated second.
+pub fn fly_with_progress(
+    scenario: &Scenario,
+    ctrl: &mut dyn Controller,
+    progress: Option<&indicatif::ProgressBar>,
+) -> FlightLog {
+    fly_observed(scenario, ctrl, progress, |_, _, _| {})
+}
+
+/// The one SITL flight loop ([`fly`], [`fly_with_progress`], and `track`'s
+/// [`super::track::track_disturbance`]): resets `ctrl`, then at every control tick measures (the
+/// scenario's sensor chain, else its state and accelerometer noise on their own streams), steps
+/// `ctrl` and the physics; stops early on a crash. After each control step, before the physics
+/// steps, `on_tick(t, ctrl, plant)` sees the controller and the plant at tick time t.
+pub fn fly_observed<C: Controller + ?Sized>(
+    scenario: &Scenario,
+    ctrl: &mut C,
+    progress: Option<&indicatif::ProgressBar>,
+    mut on_tick: impl FnMut(f64, &C, &Plant),
+) -> FlightLog {
+    let wall0 = Instant::now();
+    ctrl.reset();
+    let mut plant = scenario.plant();
+    let mut rng = ChaCha8Rng::seed_from_u64(scenario.spec.seed);
+    // The accelerometer's noise has its own stream, so the state noise is the same with or
+    // without it.
+    let mut rng_acc = ChaCha8Rng::seed_from_u64(scenario.spec.seed ^ ACC_NOISE_STREAM);
+    let dt = scenario.control_dt_s();
+    let nsub = scenario.physics_substeps();
+    let dt_phys = dt / nsub as f64;
+    let n_ticks = (scenario.spec.duration_s / dt).round() as u64;
+    let mut log = FlightLog {
+        scenario: scenario.name.clone(),
+        controller: ctrl.name().to_string(),
+        planned_duration_s: scenario.spec.duration_s,
+        control_hz: scenario.spec.control_hz,
+        physics_hz: 1.0 / dt_phys,
+        ..Default::default()
+    };
+    let ticks_per_s = (1.0 / dt).round().max(1.0) as u64;
+    let mut last_cmd = [0.0; 4];
+    let max_rpm = plant.params.max_rpm();
+    // The Crazyflie's sensor chain and estimator, sampled at every physics step.
+    let mut chain = scenario
+        .spec
+        .sensors
+        .as_ref()
+        .map(|s| crate::sim::sensors::SensorChain::new(s, plant.state(), 1.0 / dt_phys));
+    if let Some(c) = chain.as_mut() {
+        c.sample(&plant);
+    }
+    for k in 0..=n_ticks {
+        let t = k as f64 * dt;
+        plant.set_t_s(t);
+        let truth = *plant.state();
+        let r = scenario.reference(t);
+        let err = (truth.p_m - r.p_m).norm();
+        log.t_s.push(t);
+        log.p_m.push(truth.p_m.into());
+        log.p_ref_m.push(r.p_m.into());
+        log.err_m
+            .push(if err.is_finite() { err } else { f64::INFINITY });
+        log.adaptation
+            .push(ctrl.adaptation_estimate().unwrap_or_default());
+        log.rpy_rad.push(truth.rpy().into());
+        let err_ok = err.is_finite() && err <= CRASH_ERR_M;
+        if !truth.is_finite() || !err_ok || truth.p_m.z < 0.0 {
+            log.rpm.push(last_cmd);
+            log.crash_time_s = Some(t);
+            break;
+        }
+        if k == n_ticks {
+            log.rpm.push(last_cmd);
+            break;
+        }
+        let (meas, acc) = match chain.as_ref().and_then(|c| c.view()) {
+            Some(view) => {
+                log.est_p_m.push(view.state.p_m.into());
+                (view.state, view.acc_body_m_s2)
+            }
+            None => (
+                plant.measure(&mut rng),
+                plant.measure_accelerometer(&mut rng_acc),
+            ),
+        };
+        let c0 = Instant::now();
+        let cmd = ctrl.step_measured(t, &meas, Some(&acc), &r, dt);
+        log.control_wall_s += c0.elapsed().as_secs_f64();
+        log.control_steps += 1;
+        log.saturated.push(
+            cmd.iter()
+                .any(|&c| !(c > 0.0 && c < max_rpm * (1.0 - 1e-9))),
+        );
+        last_cmd = plant.params.clamp_rpm(cmd);
+        log.rpm.push(last_cmd);
+        on_tick(t, ctrl, &plant);
+        for _ in 0..nsub {
+            plant.step(last_cmd, dt_phys);
+            if let Some(c) = chain.as_mut() {
+                c.sample(&plant);
+            }
+        }
+        if let Some(pb) = progress {
+            if k % ticks_per_s == 0 {
+                pb.inc(1);
+            }
+        }
+    }
+    log.wall_s = wall0.elapsed().as_secs_f64();
+    log
+}
+
+/// The scores of one flight (the content of `report.json`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Report {
+    /// Scenario name.
+    pub scenario: String,
+    /// Scenario file, if any.
+    pub scenario_file: Option<String>,
+    /// Controller name.
+    pub controller: String,
+    /// Position RMSE over the whole flight (m).
+    pub rmse_pos_m: f64,
+    /// Position RMSE over t ≥ `window_start_s` (m).
+    pub rmse_pos_window_m: Option<f64>,
+    /// Scoring-window start (s).
+    pub window_start_s: f64,
+    /// Largest position error (m).
+    pub max_err_m: f64,
+    /// Error at the last tick (m).
+    pub final_err_m: f64,
+    /// Crashed (error > 1 m, z < 0 or non-finite state).
+    pub crashed: bool,
+    /// Crash time (s).
+    pub crash_time_s: Option<f64>,
+    /// Simulated time flown (s).
+    pub duration_s: f64,
+    /// Planned duration (s).
+    pub planned_duration_s: f64,
+    /// Control rate (Hz).
+    pub control_hz: f64,
+    /// Physics rate (Hz).
+    pub physics_hz: f64,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Simulated seconds per wall second.
+    pub sim_speed: f64,
+    /// Mean controller step cost on the host (µs).
+    pub control_step_us: f64,
+    /// Scores around the disturbance's events ([`crate::fly::events`]); empty without events.
+    #[serde(default)]
+    pub events: Vec<crate::fly::events::EventMetrics>,
+    /// Fraction of ticks whose rotor command sat at a limit.
+    #[serde(default)]
+    pub saturated_fraction: f64,
+    /// Standard deviation of the true roll and of the true pitch over t ≥ `window_start_s`, the
+    /// larger of the two (deg): the attitude loop's oscillation in hover.
+    #[serde(default)]
+    pub att_std_deg: Option<f64>,
+    /// Mean of the estimate's position error (estimate − truth) over the window (m, world);
+    /// null without a sensor chain.
+    #[serde(default)]
+    pub est_pos_bias_m: Option<[f64; 3]>,
+    /// Mean of the flown position error (truth − reference) over the window (m, world).
+    #[serde(default)]
+    pub pos_err_mean_m: Option<[f64; 3]>,
+}
+
+fn rms(xs: impl Iterator<Item = f64>) -> Option<f64> {
+    let (mut s, mut n) = (0.0, 0usize);
+    for x in xs {
+        s += x * x;
+        n += 1;
+    }
+    (n > 0).then(|| (s / n as f64).sqrt())
+}
+
+/// The mean over the window of `f(i)` for the ticks where it is defined.
+fn window_mean3(log: &FlightLog, f: impl Fn(usize) -> Option<[f64; 3]>) -> Option<[f64; 3]> {
+    let (mut s, mut n) = ([0.0; 3], 0usize);
+    for (i, t) in log.t_s.iter().enumerate() {
+        if *t < WINDOW_START_S - 1e-9 {
+            continue;
+        }
+        if let Some(x) = f(i) {
+            for k in 0..3 {
+                s[k] += x[k];
+            }
+            n += 1;
+        }
+    }
+    (n > 0).then(|| s.map(|x| x / n as f64))
+}
+
+/// The larger of the roll and pitch standard deviations over the window (deg).
+fn window_std_deg(log: &FlightLog) -> Option<f64> {
+    let w: Vec<&[f64; 3]> = log
+        .t_s
+        .iter()
+        .zip(&log.rpy_rad)
+        .filter(|(t, _)| **t >= WINDOW_START_S - 1e-9)
+        .map(|(_, a)| a)
+        .collect();
+    if w.len() < 2 {
+        return None;
+    }
+    let n = w.len() as f64;
+    let std = |k: usize| {
+        let m = w.iter().map(|a| a[k]).sum::<f64>() / n;
+        (w.iter().map(|a| (a[k] - m).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    Some(std(0).max(std(1)).to_degrees())
+}
+
+impl Report {
+    /// Score a flight log.
+    pub fn from_log(log: &FlightLog, scenario_file: Option<&Path>) -> Self {
+        let duration = log.t_s.last().copied().unwrap_or(0.0);
+        let err_at = |e: f64| if e.is_finite() { e } else { f64::MAX };
+        Self {
+            scenario: log.scenario.clone(),
+            scenario_file: scenario_file.map(|p| p.display().to_string()),
+            controller: log.controller.clone(),
+            rmse_pos_m: rms(log.err_m.iter().map(|&e| err_at(e))).unwrap_or(0.0),
+            rmse_pos_window_m: rms(log
+                .t_s
+                .iter()
+                .zip(&log.err_m)
+                .filter(|(t, _)| **t >= WINDOW_START_S - 1e-9)
+                .map(|(_, &e)| err_at(e))),
+            window_start_s: WINDOW_START_S,
+            max_err_m: log.err_m.iter().map(|&e| err_at(e)).fold(0.0, f64::max),
+            final_err_m: log.err_m.last().copied().map(err_at).unwrap_or(0.0),
+            crashed: log.crash_time_s.is_some(),
+            crash_time_s: log.crash_time_s,
+            duration_s: duration,
+            planned_duration_s: log.planned_duration_s,
+            control_hz: log.control_hz,
+            physics_hz: log.physics_hz,
+            wall_s: log.wall_s,
+            sim_speed: if log.wall_s > 0.0 {
+                duration / log.wall_s
+            } else {
+                f64::INFINITY
+            },
+            control_step_us: if log.control_steps > 0 {
+                1e6 * log.control_wall_s / log.control_steps as f64
+            } else {
+                0.0
+            },
+            events: Vec::new(),
+            saturated_fraction: if log.saturated.is_empty() {
+                0.0
+            } else {
+                log.saturated.iter().filter(|s| **s).count() as f64 / log.saturated.len() as f64
+            },
+            att_std_deg: window_std_deg(log),
+            est_pos_bias_m: window_mean3(log, |i| {
+                let (e, p) = (log.est_p_m.get(i)?, log.p_m.get(i)?);
+                Some([e[0] - p[0], e[1] - p[1], e[2] - p[2]])
+            }),
+            pos_err_mean_m: window_mean3(log, |i| {
+                let (p, r) = (log.p_m.get(i)?, log.p_ref_m.get(i)?);
+                Some([p[0] - r[0], p[1] - r[1], p[2] - r[2]])
+            }),
+        }
+    }
+
+    /// [`Report::from_log`] with the event scores of `scenario` filled in.
+    pub fn from_flight(log: &FlightLog, scenario: &Scenario, scenario_file: Option<&Path>) -> Self {
+        Self {
+            events: crate::fly::events::event_metrics(scenario, log),
+            ..Self::from_log(log, scenario_file)
+        }
+    }
+}
+
+/// Arguments of `host-train eval`.
+#[derive(Args, Debug, Clone)]
+pub struct EvalArgs {
+    /// Scenario TOML file to fly (see scenarios/*.toml for the keys).
+    #[arg(long, value_name = "FILE")]
+    pub scenario: PathBuf,
+    /// Controller to fly: pid, geometric, ida-pbc, geometric-adaptive, learned or adaptive, or
+    /// an adaptive one with its law named (adaptive-gradient, adaptive-composite,
+    /// geometric-adaptive-gradient, geometric-adaptive-composite) (default: the scenario's
+    /// `controller` key, else `geometric`).
+    #[arg(long, value_name = "NAME")]
+    pub controller: Option<String>,
+    /// Weight blob of the learned model, for `learned` and `adaptive*`.
+    #[arg(long, value_name = "FILE", default_value = crate::control::registry::DEFAULT_WEIGHTS)]
+    pub weights: PathBuf,
+    /// Output directory for report.json, path.svg and error.svg (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Also write the flight as a Bitcraze uSD-card deck log (version 2, the variables of
+    /// tools/usd/config.txt at the control rate; see `usdrecord`), for `host-train import`.
+    #[arg(long, value_name = "FILE")]
+    pub log_usd: Option<PathBuf>,
+}
+
+/// Run `host-train eval`: fly, write `report.json`, `path.svg`, `error.svg`; return the report.
+pub fn run(args: &EvalArgs) -> Result<Report> {
+    let scenario = Scenario::load(&args.scenario)?;
+    let name = args
+        .controller
+        .clone()
+        .or_else(|| scenario.spec.controller.clone())
+        .unwrap_or_else(|| "geometric".into());
+    let mut ctrl = crate::control::registry::by_name(&name, &scenario, Some(&args.weights))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory `{}`", args.out.display()))?;
+    let pb = indicatif::ProgressBar::new(scenario.spec.duration_s.ceil() as u64);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} s simulated")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb.set_message(format!("{} / {}", scenario.name, name));
+    let log = match &args.log_usd {
+        Some(path) => {
+            let params = scenario.plant().params.clone();
+            let mut rec = crate::fly::usdrecord::UsdRecorder::new(ctrl.as_mut(), params);
+            let log = fly_with_progress(&scenario, &mut rec, Some(&pb));
+            rec.write(path)?;
+            log
+        }
+        None => fly_with_progress(&scenario, ctrl.as_mut(), Some(&pb)),
+    };
+    pb.finish_and_clear();
+    let report = Report::from_flight(&log, &scenario, Some(&args.scenario));
+    write_json_atomic(&args.out.join("report.json"), &report)?;
+    crate::report::plot::path_svg(&[(name.as_str(), &log)], &args.out.join("path.svg"))?;
+    crate::report::plot::error_svg(&[(name.as_str(), &log)], &args.out.join("error.svg"))?;
+    Ok(report)
+}

@@ -1,0 +1,105 @@
+//! `host-train train`: training ([`crate::train`]), then the flight check ([`super::check`]),
+//! then the blob and its report.
+
+use super::check::{require, CHECK_SCENARIOS};
+use crate::train::export;
+use crate::train::{self as training, TrainArgs, TrainConfig, TrainReport};
+use anyhow::Result;
+use std::path::Path;
+
+/// Trains on the dataset in `data_dir`, flies the flight check (unless `cfg.flight_check` is
+/// off) and writes `out` (the blob) and `out.json` (the report).
+///
+/// # Errors
+/// As [`training::fit`]; a failed flight check ([`require`]); a failure writing the outputs.
+pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Result<TrainReport> {
+    let fitted = training::fit(cfg, data_dir, quiet)?;
+    let mut report = fitted.report;
+    if cfg.flight_check {
+        report.flight_check = Some(require(
+            &fitted.model,
+            fitted.manifest_mass_kg,
+            &fitted.vehicle,
+        )?);
+    }
+    export::write(out, &fitted.model, &report)?;
+    Ok(report)
+}
+
+/// Runs `host-train train` and prints a summary.
+///
+/// # Errors
+/// As [`run`].
+pub fn run_cli(args: &TrainArgs) -> Result<TrainReport> {
+    let r = run(&args.config(), &args.data, &args.out, args.quiet)?;
+    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
+    println!(
+        "trained {} epochs on {} windows in {:.0} s: held-out loss {:.3e} -> {:.3e}",
+        r.curve.len(),
+        r.train_windows,
+        r.train_time_s,
+        r.initial_val_loss,
+        r.final_val_loss
+    );
+    let errs = |e: &export::PredictionErrors| {
+        format!(
+            "{:.2e} / {:.2e} / {:.2e} / {:.2e}",
+            last(&e.pos_m),
+            last(&e.rot_rad),
+            last(&e.vel_m_s),
+            last(&e.rate_rad_s)
+        )
+    };
+    println!(
+        "held-out {}-step error (pos m / rot rad / vel m/s / rate rad/s): learned {}, nominal {}",
+        r.heldout_learned.pos_m.len(),
+        errs(&r.heldout_learned),
+        errs(&r.heldout_nominal),
+    );
+    if let Some(n) = &r.heldout_nominal_true_vehicle {
+        println!(
+            "held-out {}-step error of the nominal model with the dataset's mass and inertia: {}",
+            n.pos_m.len(),
+            errs(n),
+        );
+    }
+    if let Some(c) = &r.heldout_calm {
+        println!(
+            "held-out {}-step error on the {} windows of disturbance-free flights: learned {}, nominal {}",
+            c.learned.pos_m.len(),
+            c.windows,
+            errs(&c.learned),
+            errs(&c.nominal),
+        );
+    }
+    if let Some(c) = &r.flight_check {
+        let cm = |v: Option<f64>| v.map_or("—".into(), |m| format!("{:.2} cm", 100.0 * m));
+        let cells: Vec<String> = CHECK_SCENARIOS
+            .iter()
+            .map(|(name, _)| {
+                let of = |law: &str| {
+                    c.flight(name, law).map_or("—".into(), |f| match f.crash_s {
+                        Some(t) => format!("crash {t:.1} s"),
+                        None => cm(f.rmse_m),
+                    })
+                };
+                format!(
+                    "{name}: gradient {}, composite {}, without adaptation {}",
+                    of("gradient"),
+                    of("composite"),
+                    of("none")
+                )
+            })
+            .collect();
+        println!(
+            "flight check (SITL, the dataset's vehicle, 8 s): {}: passed",
+            cells.join("; ")
+        );
+    }
+    println!(
+        "wrote {} and {}.json",
+        args.out.display(),
+        args.out.display()
+    );
+    Ok(r)
+}

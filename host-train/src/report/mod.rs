@@ -1,0 +1,3 @@
+//! Reports (layer 2): the SVG figures.
+
+pub mod plot;

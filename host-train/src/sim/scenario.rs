@@ -1,0 +1,666 @@
+//! Flight scenarios: TOML files describing a reference trajectory, disturbances, effects and rates.
+//!
+//! # Keys
+//!
+//! ```toml
+//! name = "paper-spiral"          # optional; defaults to the file stem
+//! description = "..."            # optional, free text
+//! duration_s = 30.0              # flight length (s), > 0
+//! control_hz = 500.0             # controller rate (Hz), default 500
+//! physics_hz = 1000.0            # minimum physics rate (Hz), ≥ 1000, default 1000;
+//!                                # the plant takes ceil(physics_hz / control_hz) steps per tick
+//! seed = 0                       # RNG seed (state noise), default 0
+//! yaw_rad = 0.0                  # desired yaw ψ*(0) (rad), default 0
+//! yaw_rate_rad_s = 0.0           # ψ*(t) = yaw_rad + yaw_rate_rad_s · t, default 0
+//! controller = "geometric"       # optional: the controller `eval` uses when none is given
+//!
+//! [trajectory]                   # required; `kind` selects the shape (positions in m, world)
+//! kind = "hover"                 # p* = position_m
+//! position_m = [0.0, 0.0, 1.0]
+//! # kind = "step"                # p* = from_m for t < at_s, to_m after
+//! # from_m = [0,0,1]; to_m = [0.5,0,1]; at_s = 2.0
+//! # kind = "circle"              # p* = center_m + radius_m (cos 2πt/T, sin 2πt/T, 0)
+//! # center_m = [0,0,1]; radius_m = 0.5; period_s = 10.0
+//! # kind = "spiral"              # circle + (0, 0, climb_m_s · t)
+//! # center_m = [0,0,0.5]; radius_m = 0.5; period_s = 10.0; climb_m_s = 0.03
+//! # kind = "diamond"             # visits waypoints_m in a loop, segment_s per leg (smooth,
+//! #                              # zero velocity/acceleration/jerk at each waypoint),
+//! # waypoints_m = [[..],[..]]; segment_s = 2.0; hold_s = 0.0   # pausing hold_s at each
+//!
+//! [disturbance]                  # optional; all defaults = none
+//! wind_m_s2 = [0.75, 0.75, 0.0]  # world wind as specific force w (m/s²): force m·w
+//! wind_onset_s = 0.0             # wind acts from this time (s)
+//! rotor_efficiency = [0.8, 0.8, 1.0, 1.0]  # δ₁..δ₄ in [0, 2]: thrust and torque factor
+//! onset_s = 0.0                  # efficiencies apply from this time (s): a mid-flight
+//!                                # rotor fault is an onset_s > 0
+//! [[disturbance.wind_sines]]     # optional, repeatable: w(t) += A sin(2π f t + φ)
+//! amplitude_m_s2 = [0.4, 0.0, 0.0]; frequency_hz = 0.5; phase_rad = 0.0
+//! [[disturbance.wind_steps]]     # optional, repeatable: w(t) += wind_m_s2 on [from_s, until_s)
+//! wind_m_s2 = [0.8, 0.6, 0.0]; from_s = 6.0; until_s = 16.0   # until_s optional (to the end)
+//!
+//! [effects]                      # optional; all off by default
+//! rotor_drag = false
+//! ground_effect = false
+//! motor_tau_s = 0.0              # first-order motor lag time constant (s), 0 = off
+//! [effects.noise]                # measurement noise σ on the controller's state
+//! pos_m = 0.0; vel_m_s = 0.0; att_rad = 0.0; rate_rad_s = 0.0
+//! acc_m_s2 = 0.0                 # accelerometer noise σ (m/s²), its own random stream
+//!
+//! [vehicle]                      # optional; default: the CF2X of docs/design.md
+//! mass_kg = 0.034                # mass (kg); the motors' top speed stays the CF2X's, so the
+//!                                # thrust-to-weight ratio falls as the mass grows
+//! inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.821e-5]  # diag(J) (kg·m²)
+//! rotor_efficiency = [1.0, 1.0, 0.9, 1.0]  # the vehicle's own rotors, in (0, 2], always on;
+//!                                # multiplies `disturbance.rotor_efficiency`
+//!
+//! [sensors]                      # optional; absent = the controller sees the (noisy) truth
+//!                                # the Crazyflie's IMU, filters, pose source and EKF in the
+//!                                # loop: see `sensors` for the keys and their defaults
+//! gyro_lpf_hz = 80.0
+//!
+//! [start]                        # optional; default: at rest, level, on p*(0) with yaw ψ*(0)
+//! position_m = [0.0, 0.0, 0.5]
+//! velocity_m_s = [0.0, 0.0, 0.0] # world frame
+//! rpy_rad = [0.0, 0.0, 0.0]      # roll, pitch, yaw (Z-Y-X)
+//! rate_rad_s = [0.0, 0.0, 0.0]   # body angular velocity
+//! ```
+//!
+//! Unknown keys are errors; every error names the file and the offending key.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::sim::plant::{
+    rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams, WindSine, WindStep,
+    WindVariation,
+};
+use crate::sim::trajectory::TrajectoryPoint;
+
+/// The reference trajectory's shape.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Trajectory {
+    /// Hold a position.
+    Hover {
+        /// Position (m, world).
+        position_m: [f64; 3],
+    },
+    /// Jump from one position to another at `at_s`.
+    Step {
+        /// Position before the step (m).
+        from_m: [f64; 3],
+        /// Position after the step (m).
+        to_m: [f64; 3],
+        /// Time of the step (s).
+        at_s: f64,
+    },
+    /// Horizontal circle, counter-clockwise seen from above, starting at center + (radius, 0, 0).
+    Circle {
+        /// Center (m).
+        center_m: [f64; 3],
+        /// Radius (m).
+        radius_m: f64,
+        /// Period of one revolution (s).
+        period_s: f64,
+    },
+    /// Circle climbing at a constant rate.
+    Spiral {
+        /// Center at t = 0 (m).
+        center_m: [f64; 3],
+        /// Radius (m).
+        radius_m: f64,
+        /// Period of one revolution (s).
+        period_s: f64,
+        /// Climb rate (m/s).
+        climb_m_s: f64,
+    },
+    /// Smooth legs between waypoints, looping back to the first.
+    Diamond {
+        /// Waypoints (m), at least two.
+        waypoints_m: Vec<[f64; 3]>,
+        /// Duration of each leg (s).
+        segment_s: f64,
+        /// Pause at each waypoint (s).
+        #[serde(default)]
+        hold_s: f64,
+    },
+}
+
+/// The `[disturbance]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DisturbanceSpec {
+    /// Wind specific force w (m/s², world).
+    pub wind_m_s2: [f64; 3],
+    /// Wind onset (s).
+    pub wind_onset_s: f64,
+    /// Rotor efficiencies δ₁..δ₄.
+    pub rotor_efficiency: [f64; 4],
+    /// Efficiency onset (s).
+    pub onset_s: f64,
+    /// Sinusoidal wind components (added).
+    pub wind_sines: Vec<WindSine>,
+    /// Wind steps (added).
+    pub wind_steps: Vec<WindStep>,
+}
+
+impl Default for DisturbanceSpec {
+    fn default() -> Self {
+        Self {
+            wind_m_s2: [0.0; 3],
+            wind_onset_s: 0.0,
+            rotor_efficiency: [1.0; 4],
+            onset_s: 0.0,
+            wind_sines: Vec::new(),
+            wind_steps: Vec::new(),
+        }
+    }
+}
+
+impl DisturbanceSpec {
+    /// The times (s) at which the disturbance changes abruptly, sorted: the wind onset and the
+    /// efficiency onset when after t = 0, and each wind step's edges.
+    pub fn event_times_s(&self) -> Vec<f64> {
+        let mut t = Vec::new();
+        if self.wind_onset_s > 0.0 && self.wind_m_s2 != [0.0; 3] {
+            t.push(self.wind_onset_s);
+        }
+        if self.onset_s > 0.0 && self.rotor_efficiency != [1.0; 4] {
+            t.push(self.onset_s);
+        }
+        for s in &self.wind_steps {
+            t.push(s.from_s);
+            t.extend(s.until_s);
+        }
+        t.sort_by(f64::total_cmp);
+        t.dedup();
+        t
+    }
+}
+
+/// The `[vehicle]` table: what differs from the CF2X (every key optional).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleSpec {
+    /// Mass (kg).
+    pub mass_kg: Option<f64>,
+    /// Principal moments of inertia diag(J) (kg·m²).
+    pub inertia_kg_m2: Option<[f64; 3]>,
+    /// The vehicle's own rotor efficiencies (always on).
+    pub rotor_efficiency: Option<[f64; 4]>,
+}
+
+impl VehicleSpec {
+    /// The CF2X with this table's changes. A new mass keeps the motors: the top rotor speed
+    /// ([`VehicleParams::max_rpm`]) stays the CF2X's, so the thrust-to-weight ratio scales by
+    /// 0.027 kg / mass.
+    pub fn params(&self) -> VehicleParams {
+        let mut v = VehicleParams::cf2x();
+        if let Some(m) = self.mass_kg {
+            v.thrust_to_weight *= v.mass_kg / m;
+            v.mass_kg = m;
+        }
+        if let Some(j) = self.inertia_kg_m2 {
+            v.inertia_kg_m2 = j;
+        }
+        if let Some(e) = self.rotor_efficiency {
+            v.rotor_efficiency = e;
+        }
+        v
+    }
+}
+
+/// The `[start]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StartSpec {
+    /// Initial position (m, world).
+    pub position_m: [f64; 3],
+    /// Initial velocity (m/s, world).
+    #[serde(default)]
+    pub velocity_m_s: [f64; 3],
+    /// Initial roll, pitch, yaw (rad).
+    #[serde(default)]
+    pub rpy_rad: [f64; 3],
+    /// Initial body angular velocity (rad/s).
+    #[serde(default)]
+    pub rate_rad_s: [f64; 3],
+}
+
+fn default_control_hz() -> f64 {
+    500.0
+}
+fn default_physics_hz() -> f64 {
+    1000.0
+}
+
+/// The file's contents, as parsed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioSpec {
+    /// Scenario name.
+    pub name: Option<String>,
+    /// Free text.
+    pub description: Option<String>,
+    /// Flight length (s).
+    pub duration_s: f64,
+    /// Controller rate (Hz).
+    #[serde(default = "default_control_hz")]
+    pub control_hz: f64,
+    /// Minimum physics rate (Hz).
+    #[serde(default = "default_physics_hz")]
+    pub physics_hz: f64,
+    /// RNG seed.
+    #[serde(default)]
+    pub seed: u64,
+    /// Desired yaw at t = 0 (rad).
+    #[serde(default)]
+    pub yaw_rad: f64,
+    /// Desired yaw rate (rad/s).
+    #[serde(default)]
+    pub yaw_rate_rad_s: f64,
+    /// Default controller name for `eval`.
+    pub controller: Option<String>,
+    /// Reference trajectory.
+    pub trajectory: Trajectory,
+    /// Disturbance.
+    #[serde(default)]
+    pub disturbance: DisturbanceSpec,
+    /// Optional effects.
+    #[serde(default)]
+    pub effects: Effects,
+    /// The vehicle, where it differs from the CF2X.
+    #[serde(default)]
+    pub vehicle: VehicleSpec,
+    /// The sensor chain and estimator in the loop ([`crate::sim::sensors`]); none = the truth.
+    #[serde(default)]
+    pub sensors: Option<crate::sim::sensors::SensorSpec>,
+    /// Initial state.
+    pub start: Option<StartSpec>,
+}
+
+/// A validated scenario.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    /// Name (the `name` key, else the file stem).
+    pub name: String,
+    /// The file it came from, if any.
+    pub path: Option<PathBuf>,
+    /// The parsed keys.
+    pub spec: ScenarioSpec,
+    /// Vehicle constants (the CF2X with the `[vehicle]` table's changes).
+    pub vehicle: VehicleParams,
+}
+
+impl Scenario {
+    /// Read and validate a scenario file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read scenario file `{}`", path.display()))?;
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scenario".into());
+        let mut s = Self::from_toml_str(&text, &path.display().to_string(), &stem)?;
+        s.path = Some(path.to_path_buf());
+        Ok(s)
+    }
+
+    /// Parse and validate scenario TOML; `origin` names the source in errors, `default_name` is
+    /// used when the file has no `name`.
+    pub fn from_toml_str(text: &str, origin: &str, default_name: &str) -> Result<Self> {
+        let spec: ScenarioSpec = toml::from_str(text)
+            .map_err(|e| anyhow::anyhow!("bad scenario file `{origin}`: {e}"))?;
+        validate(&spec).with_context(|| format!("bad scenario file `{origin}`"))?;
+        Ok(Self {
+            name: spec
+                .name
+                .clone()
+                .unwrap_or_else(|| default_name.to_string()),
+            path: None,
+            vehicle: spec.vehicle.params(),
+            spec,
+        })
+    }
+
+    /// Build a scenario from a spec in code (validated).
+    pub fn from_spec(name: &str, spec: ScenarioSpec) -> Result<Self> {
+        validate(&spec).with_context(|| format!("bad scenario `{name}`"))?;
+        Ok(Self {
+            name: name.to_string(),
+            path: None,
+            vehicle: spec.vehicle.params(),
+            spec,
+        })
+    }
+
+    /// Control tick period (s).
+    pub fn control_dt_s(&self) -> f64 {
+        1.0 / self.spec.control_hz
+    }
+
+    /// Physics steps per control tick: ceil(physics_hz / control_hz), at least 1.
+    pub fn physics_substeps(&self) -> usize {
+        ((self.spec.physics_hz / self.spec.control_hz) - 1e-9)
+            .ceil()
+            .max(1.0) as usize
+    }
+
+    /// The disturbance the plant feels.
+    pub fn disturbance(&self) -> Disturbance {
+        let d = &self.spec.disturbance;
+        Disturbance {
+            wind_m_s2: d.wind_m_s2,
+            wind_onset_s: d.wind_onset_s,
+            rotor_efficiency: d.rotor_efficiency,
+            efficiency_onset_s: d.onset_s,
+        }
+    }
+
+    /// The initial state: the `[start]` table, else at rest on p*(0) with yaw ψ*(0).
+    pub fn initial_state(&self) -> PlantState {
+        match &self.spec.start {
+            Some(st) => {
+                let rot = rot_from_rpy(Vector3::from(st.rpy_rad));
+                PlantState {
+                    p_m: Vector3::from(st.position_m),
+                    rot,
+                    v_body_m_s: rot.transpose() * Vector3::from(st.velocity_m_s),
+                    w_body_rad_s: Vector3::from(st.rate_rad_s),
+                }
+            }
+            None => {
+                let r = self.reference(0.0);
+                PlantState::at_rest(r.p_m, r.yaw_rad)
+            }
+        }
+    }
+
+    /// The time-varying part of the wind.
+    pub fn wind_variation(&self) -> WindVariation {
+        WindVariation {
+            sines: self.spec.disturbance.wind_sines.clone(),
+            steps: self.spec.disturbance.wind_steps.clone(),
+        }
+    }
+
+    /// A fresh plant at t = 0 in the initial state.
+    pub fn plant(&self) -> Plant {
+        let mut p = Plant::new(
+            self.vehicle.clone(),
+            self.disturbance(),
+            self.spec.effects.clone(),
+            self.initial_state(),
+        );
+        p.wind_variation = self.wind_variation();
+        p
+    }
+
+    /// The reference at time `t_s`, with analytic derivatives up to jerk.
+    pub fn reference(&self, t_s: f64) -> TrajectoryPoint {
+        let mut tp = trajectory_point(&self.spec.trajectory, t_s);
+        tp.yaw_rad = self.spec.yaw_rad + self.spec.yaw_rate_rad_s * t_s;
+        tp.yaw_rate_rad_s = self.spec.yaw_rate_rad_s;
+        tp
+    }
+}
+
+fn v3(a: [f64; 3]) -> Vector3<f64> {
+    Vector3::from(a)
+}
+
+/// Position and derivatives of a trajectory at `t` (yaw left at 0).
+pub fn trajectory_point(tr: &Trajectory, t: f64) -> TrajectoryPoint {
+    let z = Vector3::zeros();
+    match tr {
+        Trajectory::Hover { position_m } => TrajectoryPoint::hover(v3(*position_m), 0.0),
+        Trajectory::Step { from_m, to_m, at_s } => {
+            TrajectoryPoint::hover(v3(if t < *at_s { *from_m } else { *to_m }), 0.0)
+        }
+        Trajectory::Circle {
+            center_m,
+            radius_m,
+            period_s,
+        } => circle(v3(*center_m), *radius_m, *period_s, z, t),
+        Trajectory::Spiral {
+            center_m,
+            radius_m,
+            period_s,
+            climb_m_s,
+        } => circle(
+            v3(*center_m),
+            *radius_m,
+            *period_s,
+            Vector3::new(0.0, 0.0, *climb_m_s),
+            t,
+        ),
+        Trajectory::Diamond {
+            waypoints_m,
+            segment_s,
+            hold_s,
+        } => {
+            let n = waypoints_m.len();
+            let leg = segment_s + hold_s;
+            let tt = t.max(0.0) % (n as f64 * leg);
+            let k = ((tt / leg).floor() as usize).min(n - 1);
+            let a = v3(waypoints_m[k]);
+            let b = v3(waypoints_m[(k + 1) % n]);
+            let tau = ((tt - k as f64 * leg - hold_s) / segment_s).clamp(0.0, 1.0);
+            let in_motion = tt - k as f64 * leg >= *hold_s;
+            let (s, s1, s2, s3) = septic(tau);
+            let d = b - a;
+            let (s1, s2, s3) = if in_motion {
+                (s1, s2, s3)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            TrajectoryPoint {
+                p_m: a + d * s,
+                v_m_s: d * (s1 / segment_s),
+                a_m_s2: d * (s2 / segment_s.powi(2)),
+                j_m_s3: d * (s3 / segment_s.powi(3)),
+                yaw_rad: 0.0,
+                yaw_rate_rad_s: 0.0,
+            }
+        }
+    }
+}
+
+fn circle(c: Vector3<f64>, r: f64, period: f64, climb: Vector3<f64>, t: f64) -> TrajectoryPoint {
+    let w = core::f64::consts::TAU / period;
+    let (s, co) = (w * t).sin_cos();
+    TrajectoryPoint {
+        p_m: c + Vector3::new(r * co, r * s, 0.0) + climb * t,
+        v_m_s: Vector3::new(-r * w * s, r * w * co, 0.0) + climb,
+        a_m_s2: Vector3::new(-r * w * w * co, -r * w * w * s, 0.0),
+        j_m_s3: Vector3::new(r * w.powi(3) * s, -r * w.powi(3) * co, 0.0),
+        yaw_rad: 0.0,
+        yaw_rate_rad_s: 0.0,
+    }
+}
+
+/// The septic smooth step s(τ) = 35τ⁴ − 84τ⁵ + 70τ⁶ − 20τ⁷ and its first three derivatives in τ
+/// (zero velocity, acceleration and jerk at both ends).
+pub fn septic(t: f64) -> (f64, f64, f64, f64) {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    let t4 = t3 * t;
+    (
+        t4 * (35.0 - 84.0 * t + 70.0 * t2 - 20.0 * t3),
+        t3 * (140.0 - 420.0 * t + 420.0 * t2 - 140.0 * t3),
+        t2 * (420.0 - 1680.0 * t + 2100.0 * t2 - 840.0 * t3),
+        t * (840.0 - 5040.0 * t + 8400.0 * t2 - 4200.0 * t3),
+    )
+}
+
+fn finite_all(xs: &[f64]) -> bool {
+    xs.iter().all(|x| x.is_finite())
+}
+
+fn validate(s: &ScenarioSpec) -> Result<()> {
+    if let Some(sensors) = &s.sensors {
+        sensors.validate()?;
+    }
+    if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
+        bail!(
+            "key `duration_s`: expected a positive number of seconds, got {}",
+            s.duration_s
+        );
+    }
+    if !(s.control_hz.is_finite() && s.control_hz > 0.0) {
+        bail!(
+            "key `control_hz`: expected a positive rate in Hz, got {}",
+            s.control_hz
+        );
+    }
+    if !(s.physics_hz.is_finite() && s.physics_hz >= 1000.0) {
+        bail!(
+            "key `physics_hz`: expected a rate ≥ 1000 Hz (physics step ≤ 1 ms), got {}",
+            s.physics_hz
+        );
+    }
+    if !s.yaw_rad.is_finite() || !s.yaw_rate_rad_s.is_finite() {
+        bail!("keys `yaw_rad`/`yaw_rate_rad_s`: expected finite numbers");
+    }
+    let pos = |name: &str, x: f64| -> Result<()> {
+        if x.is_finite() && x > 0.0 {
+            Ok(())
+        } else {
+            bail!("key `trajectory.{name}`: expected a positive number, got {x}")
+        }
+    };
+    match &s.trajectory {
+        Trajectory::Hover { position_m } => {
+            if !finite_all(position_m) {
+                bail!("key `trajectory.position_m`: expected three finite numbers");
+            }
+        }
+        Trajectory::Step { from_m, to_m, at_s } => {
+            if !finite_all(from_m) || !finite_all(to_m) || !at_s.is_finite() {
+                bail!("keys `trajectory.from_m`, `to_m`, `at_s`: expected finite numbers");
+            }
+        }
+        Trajectory::Circle {
+            center_m,
+            radius_m,
+            period_s,
+        } => {
+            if !finite_all(center_m) {
+                bail!("key `trajectory.center_m`: expected three finite numbers");
+            }
+            pos("radius_m", *radius_m)?;
+            pos("period_s", *period_s)?;
+        }
+        Trajectory::Spiral {
+            center_m,
+            radius_m,
+            period_s,
+            climb_m_s,
+        } => {
+            if !finite_all(center_m) || !climb_m_s.is_finite() {
+                bail!("keys `trajectory.center_m`/`climb_m_s`: expected finite numbers");
+            }
+            pos("radius_m", *radius_m)?;
+            pos("period_s", *period_s)?;
+        }
+        Trajectory::Diamond {
+            waypoints_m,
+            segment_s,
+            hold_s,
+        } => {
+            if waypoints_m.len() < 2 {
+                bail!(
+                    "key `trajectory.waypoints_m`: expected at least 2 waypoints, got {}",
+                    waypoints_m.len()
+                );
+            }
+            if !waypoints_m.iter().all(|w| finite_all(w)) {
+                bail!("key `trajectory.waypoints_m`: expected finite numbers");
+            }
+            pos("segment_s", *segment_s)?;
+            if !(hold_s.is_finite() && *hold_s >= 0.0) {
+                bail!("key `trajectory.hold_s`: expected a number ≥ 0, got {hold_s}");
+            }
+        }
+    }
+    let d = &s.disturbance;
+    if !finite_all(&d.wind_m_s2) {
+        bail!("key `disturbance.wind_m_s2`: expected three finite numbers (m/s²)");
+    }
+    if !d
+        .rotor_efficiency
+        .iter()
+        .all(|x| x.is_finite() && (0.0..=2.0).contains(x))
+    {
+        bail!(
+            "key `disturbance.rotor_efficiency`: expected four numbers in [0, 2], got {:?}",
+            d.rotor_efficiency
+        );
+    }
+    if !d.onset_s.is_finite() || !d.wind_onset_s.is_finite() {
+        bail!("keys `disturbance.onset_s`/`wind_onset_s`: expected finite times (s)");
+    }
+    for (i, w) in d.wind_sines.iter().enumerate() {
+        let ok = finite_all(&w.amplitude_m_s2)
+            && w.phase_rad.is_finite()
+            && w.frequency_hz.is_finite()
+            && w.frequency_hz >= 0.0;
+        if !ok {
+            bail!(
+                "key `disturbance.wind_sines[{i}]`: expected finite amplitudes (m/s²), phase \
+                 (rad) and a frequency ≥ 0 Hz"
+            );
+        }
+    }
+    for (i, w) in d.wind_steps.iter().enumerate() {
+        let until_ok = w.until_s.is_none_or(|u| u.is_finite() && u > w.from_s);
+        if !(finite_all(&w.wind_m_s2) && w.from_s.is_finite() && until_ok) {
+            bail!(
+                "key `disturbance.wind_steps[{i}]`: expected finite wind (m/s²), a finite \
+                 `from_s` and an `until_s` after it"
+            );
+        }
+    }
+    let e = &s.effects;
+    if !(e.motor_tau_s.is_finite() && e.motor_tau_s >= 0.0) {
+        bail!(
+            "key `effects.motor_tau_s`: expected a time constant ≥ 0 s, got {}",
+            e.motor_tau_s
+        );
+    }
+    let n = &e.noise;
+    if ![n.pos_m, n.vel_m_s, n.att_rad, n.rate_rad_s, n.acc_m_s2]
+        .iter()
+        .all(|x| x.is_finite() && *x >= 0.0)
+    {
+        bail!("key `effects.noise`: expected standard deviations ≥ 0");
+    }
+    let v = &s.vehicle;
+    if v.mass_kg.is_some_and(|m| !(m.is_finite() && m > 0.0)) {
+        bail!("key `vehicle.mass_kg`: expected a positive mass (kg)");
+    }
+    if v.inertia_kg_m2
+        .is_some_and(|j| !j.iter().all(|x| x.is_finite() && *x > 0.0))
+    {
+        bail!("key `vehicle.inertia_kg_m2`: expected three positive moments (kg·m²)");
+    }
+    if v.rotor_efficiency
+        .is_some_and(|e| !e.iter().all(|x| x.is_finite() && *x > 0.0 && *x <= 2.0))
+    {
+        bail!("key `vehicle.rotor_efficiency`: expected four numbers in (0, 2]");
+    }
+    if let Some(st) = &s.start {
+        if !finite_all(&st.position_m)
+            || !finite_all(&st.velocity_m_s)
+            || !finite_all(&st.rpy_rad)
+            || !finite_all(&st.rate_rad_s)
+        {
+            bail!("key `start`: expected finite numbers");
+        }
+    }
+    Ok(())
+}
