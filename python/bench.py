@@ -13,11 +13,17 @@ import json
 import os
 import pathlib
 import subprocess
+import sys
 import time
 
-import numpy as np
+# Python puts this script's folder first on the path, where the source package (without its
+# compiled `_core`) would shadow the installed wheel.
+_here = pathlib.Path(__file__).resolve().parent
+sys.path = [p for p in sys.path if pathlib.Path(p or ".").resolve() != _here]
 
-import hamflight
+import numpy as np  # noqa: E402
+
+import hamflight  # noqa: E402
 
 ap = argparse.ArgumentParser()
 ap.add_argument("--steps", type=int, default=200_000)
