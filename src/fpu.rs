@@ -203,131 +203,100 @@ mod m4f {
         };
     }
 
-    /// All `rows` outputs of a 16-input layer, two rows per pass.
-    ///
-    /// # Safety
-    /// `w` points at `rows` × 16 readable f32, `b` at `rows` readable f32, `x` at 16 readable
-    /// f32, `y` at `rows` writable f32, and `rows` is even and > 0.
-    #[inline(always)]
-    pub unsafe fn rows16(w: *const f32, b: *const f32, x: *const f32, y: *mut f32, rows: usize) {
-        // SAFETY: the caller's contract. Every FPU register is saved on entry and restored on
-        // exit, so none changes across the block; the core registers used are declared.
-        unsafe {
-            asm!(
-                "vpush {{s0-s31}}",
-                "vldmia {x}, {{s0-s15}}",
-                "2:",
-                pair16_asm!(),
-                "vstmia {y}!, {{s30-s31}}",
-                "subs {n}, {n}, #2",
-                "bne 2b",
-                "vpop {{s0-s31}}",
-                w = inout(reg) w => _,
-                b = inout(reg) b => _,
-                x = in(reg) x,
-                y = inout(reg) y => _,
-                n = inout(reg) rows => _,
-            );
-        }
+    /// A layer kernel: the inputs loaded once (`$load`), then two rows a pass (`$pair`), with
+    /// the activation applied to both in registers when the kernel takes the constants `c`.
+    /// Every FPU register is saved on entry and restored on exit, so none changes across the
+    /// block; the core registers used are declared.
+    macro_rules! layer_kernel {
+        ($(#[$doc:meta])* $name:ident, $load:literal, $pair:ident, tanh) => {
+            $(#[$doc])*
+            #[inline(always)]
+            pub unsafe fn $name(
+                w: *const f32,
+                b: *const f32,
+                x: *const f32,
+                y: *mut f32,
+                rows: usize,
+                c: *const f32,
+            ) {
+                // SAFETY: the caller's contract (see the function's documentation).
+                unsafe {
+                    asm!(
+                        "vpush {{s0-s31}}",
+                        $load,
+                        "2:",
+                        $pair!(),
+                        tanh_asm!("s30"),
+                        tanh_asm!("s31"),
+                        "vstmia {y}!, {{s30-s31}}",
+                        "subs {n}, {n}, #2",
+                        "bne 2b",
+                        "vpop {{s0-s31}}",
+                        w = inout(reg) w => _,
+                        b = inout(reg) b => _,
+                        x = in(reg) x,
+                        y = inout(reg) y => _,
+                        n = inout(reg) rows => _,
+                        c = in(reg) c,
+                    );
+                }
+            }
+        };
+        ($(#[$doc:meta])* $name:ident, $load:literal, $pair:ident) => {
+            $(#[$doc])*
+            #[inline(always)]
+            pub unsafe fn $name(w: *const f32, b: *const f32, x: *const f32, y: *mut f32, rows: usize) {
+                // SAFETY: the caller's contract (see the function's documentation).
+                unsafe {
+                    asm!(
+                        "vpush {{s0-s31}}",
+                        $load,
+                        "2:",
+                        $pair!(),
+                        "vstmia {y}!, {{s30-s31}}",
+                        "subs {n}, {n}, #2",
+                        "bne 2b",
+                        "vpop {{s0-s31}}",
+                        w = inout(reg) w => _,
+                        b = inout(reg) b => _,
+                        x = in(reg) x,
+                        y = inout(reg) y => _,
+                        n = inout(reg) rows => _,
+                    );
+                }
+            }
+        };
     }
 
-    /// All `rows` outputs of a 16-input layer through the activation, two rows per pass.
-    ///
-    /// # Safety
-    /// As [`rows16`]; `c` points at the 11 f32 of [`super::TANH_TABLE`].
-    #[inline(always)]
-    pub unsafe fn rows16_tanh(
-        w: *const f32,
-        b: *const f32,
-        x: *const f32,
-        y: *mut f32,
-        rows: usize,
-        c: *const f32,
-    ) {
-        // SAFETY: as in `rows16`.
-        unsafe {
-            asm!(
-                "vpush {{s0-s31}}",
-                "vldmia {x}, {{s0-s15}}",
-                "2:",
-                pair16_asm!(),
-                tanh_asm!("s30"),
-                tanh_asm!("s31"),
-                "vstmia {y}!, {{s30-s31}}",
-                "subs {n}, {n}, #2",
-                "bne 2b",
-                "vpop {{s0-s31}}",
-                w = inout(reg) w => _,
-                b = inout(reg) b => _,
-                x = in(reg) x,
-                y = inout(reg) y => _,
-                n = inout(reg) rows => _,
-                c = in(reg) c,
-            );
-        }
-    }
-
-    /// All `rows` outputs of a 9-input layer (the rows of R), two rows per pass.
-    ///
-    /// # Safety
-    /// As [`rows16`] with 9 inputs and 9 weights per row.
-    #[inline(always)]
-    pub unsafe fn rows9(w: *const f32, b: *const f32, x: *const f32, y: *mut f32, rows: usize) {
-        // SAFETY: as in `rows16`.
-        unsafe {
-            asm!(
-                "vpush {{s0-s31}}",
-                "vldmia {x}, {{s0-s8}}",
-                "2:",
-                pair9_asm!(),
-                "vstmia {y}!, {{s30-s31}}",
-                "subs {n}, {n}, #2",
-                "bne 2b",
-                "vpop {{s0-s31}}",
-                w = inout(reg) w => _,
-                b = inout(reg) b => _,
-                x = in(reg) x,
-                y = inout(reg) y => _,
-                n = inout(reg) rows => _,
-            );
-        }
-    }
-
-    /// All `rows` outputs of a 9-input layer through the activation, two rows per pass.
-    ///
-    /// # Safety
-    /// As [`rows9`]; `c` points at the 11 f32 of [`super::TANH_TABLE`].
-    #[inline(always)]
-    pub unsafe fn rows9_tanh(
-        w: *const f32,
-        b: *const f32,
-        x: *const f32,
-        y: *mut f32,
-        rows: usize,
-        c: *const f32,
-    ) {
-        // SAFETY: as in `rows16`.
-        unsafe {
-            asm!(
-                "vpush {{s0-s31}}",
-                "vldmia {x}, {{s0-s8}}",
-                "2:",
-                pair9_asm!(),
-                tanh_asm!("s30"),
-                tanh_asm!("s31"),
-                "vstmia {y}!, {{s30-s31}}",
-                "subs {n}, {n}, #2",
-                "bne 2b",
-                "vpop {{s0-s31}}",
-                w = inout(reg) w => _,
-                b = inout(reg) b => _,
-                x = in(reg) x,
-                y = inout(reg) y => _,
-                n = inout(reg) rows => _,
-                c = in(reg) c,
-            );
-        }
-    }
+    layer_kernel!(
+        /// All `rows` outputs of a 16-input layer, two rows per pass.
+        ///
+        /// # Safety
+        /// `w` points at `rows` × 16 readable f32, `b` at `rows` readable f32, `x` at 16
+        /// readable f32, `y` at `rows` writable f32, and `rows` is even and > 0.
+        rows16, "vldmia {x}, {{s0-s15}}", pair16_asm
+    );
+    layer_kernel!(
+        /// All `rows` outputs of a 16-input layer through the activation, two rows per pass.
+        ///
+        /// # Safety
+        /// As [`rows16`]; `c` points at the 11 f32 of [`super::TANH_TABLE`].
+        rows16_tanh, "vldmia {x}, {{s0-s15}}", pair16_asm, tanh
+    );
+    layer_kernel!(
+        /// All `rows` outputs of a 9-input layer (the rows of R), two rows per pass.
+        ///
+        /// # Safety
+        /// As [`rows16`] with 9 inputs and 9 weights per row.
+        rows9, "vldmia {x}, {{s0-s8}}", pair9_asm
+    );
+    layer_kernel!(
+        /// All `rows` outputs of a 9-input layer through the activation, two rows per pass.
+        ///
+        /// # Safety
+        /// As [`rows9`]; `c` points at the 11 f32 of [`super::TANH_TABLE`].
+        rows9_tanh, "vldmia {x}, {{s0-s8}}", pair9_asm, tanh
+    );
 
     /// The composite law's six scalar Kalman updates ([`super::kalman_rows`]'s sequence).
     /// Registers: h (then k) s0–s5, z s6, r s7, a s8–s13, P hᵀ s14–s19, s s20, e and ν s21,
