@@ -465,7 +465,7 @@ mod m4f {
 
 /// |x| beyond which [`tanh`]'s rational form is clamped (its own value there is within its
 /// bound of 1).
-pub const TANH_CLAMP: f32 = 6.9;
+const TANH_CLAMP: f32 = 6.9;
 
 /// The numerator's coefficients A₀…A₄ of [`tanh`] (in x², times x).
 const TANH_A: [f32; 5] = [
@@ -525,11 +525,11 @@ pub fn tanh(x: f32) -> f32 {
     p / q
 }
 
-/// The portable dense layer: the outputs' chains interleaved input by input (each output still
-/// one chain from its bias in input order, so the same bits as row by row), which lets a host
-/// core overlap the independent chains.
+/// The portable dense layer, through [`tanh`] when `ACT`: the outputs' chains interleaved input
+/// by input (each output still one chain from its bias in input order, so the same bits as row
+/// by row), which lets a host core overlap the independent chains.
 #[inline(always)]
-fn affine_portable<const I: usize, const O: usize>(
+fn layer_portable<const I: usize, const O: usize, const ACT: bool>(
     w: &[[f32; I]; O],
     b: &[f32; O],
     x: &[f32; I],
@@ -542,18 +542,10 @@ fn affine_portable<const I: usize, const O: usize>(
             }
         }
     }
-    y
-}
-
-#[inline(always)]
-fn affine_tanh_portable<const I: usize, const O: usize>(
-    w: &[[f32; I]; O],
-    b: &[f32; O],
-    x: &[f32; I],
-) -> [f32; O] {
-    let mut y = affine_portable(w, b, x);
-    for v in y.iter_mut() {
-        *v = tanh(*v);
+    if ACT {
+        for v in y.iter_mut() {
+            *v = tanh(*v);
+        }
     }
     y
 }
@@ -573,32 +565,7 @@ pub fn affine<const I: usize, const O: usize>(
     b: &[f32; O],
     x: &[f32; I],
 ) -> [f32; O] {
-    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
-    if m4f_shape(I, O) {
-        let mut y = core::mem::MaybeUninit::<[f32; O]>::uninit();
-        let (wp, bp, xp, yp) = (
-            w.as_ptr().cast::<f32>(),
-            b.as_ptr(),
-            x.as_ptr(),
-            y.as_mut_ptr().cast::<f32>(),
-        );
-        // SAFETY: `w` is O contiguous rows of I f32, `b` and `y` hold O, `x` holds I, O is
-        // even and > 0; the kernel writes all O outputs, so `y` is initialized after it.
-        unsafe {
-            if I == 16 {
-                m4f::rows16(wp, bp, xp, yp, O);
-            } else {
-                m4f::rows9(wp, bp, xp, yp, O);
-            }
-            return y.assume_init();
-        }
-    }
-    #[cfg(all(feature = "std", target_arch = "x86_64"))]
-    if std::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU has the FMA extension (checked just above; the check is cached).
-        return unsafe { x86::affine(w, b, x) };
-    }
-    affine_portable(w, b, x)
+    layer::<I, O, false>(w, b, x)
 }
 
 /// tanh(W x + b), elementwise: [`affine`] then [`tanh`], the same bits; on the M4F one kernel
@@ -609,22 +576,35 @@ pub fn affine_tanh<const I: usize, const O: usize>(
     b: &[f32; O],
     x: &[f32; I],
 ) -> [f32; O] {
+    layer::<I, O, true>(w, b, x)
+}
+
+/// [`affine`] (`ACT` false) or [`affine_tanh`] (`ACT` true) on the fastest path the target has:
+/// the M4F kernels, the host's FMA instructions, or the portable loop; the same bits on each.
+#[inline(always)]
+fn layer<const I: usize, const O: usize, const ACT: bool>(
+    w: &[[f32; I]; O],
+    b: &[f32; O],
+    x: &[f32; I],
+) -> [f32; O] {
     #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
     if m4f_shape(I, O) {
         let mut y = core::mem::MaybeUninit::<[f32; O]>::uninit();
-        let (wp, bp, xp, yp, cp) = (
+        let (wp, bp, xp, yp) = (
             w.as_ptr().cast::<f32>(),
             b.as_ptr(),
             x.as_ptr(),
             y.as_mut_ptr().cast::<f32>(),
-            TANH_TABLE.as_ptr(),
         );
-        // SAFETY: as in `affine`; `cp` points at the 11 constants of the table.
+        // SAFETY: `w` is O contiguous rows of I f32, `b` and `y` hold O, `x` holds I, O is
+        // even and > 0, the table holds the 11 constants; the kernel writes all O outputs, so
+        // `y` is initialized after it.
         unsafe {
-            if I == 16 {
-                m4f::rows16_tanh(wp, bp, xp, yp, O, cp);
-            } else {
-                m4f::rows9_tanh(wp, bp, xp, yp, O, cp);
+            match (ACT, I == 16) {
+                (true, true) => m4f::rows16_tanh(wp, bp, xp, yp, O, TANH_TABLE.as_ptr()),
+                (true, false) => m4f::rows9_tanh(wp, bp, xp, yp, O, TANH_TABLE.as_ptr()),
+                (false, true) => m4f::rows16(wp, bp, xp, yp, O),
+                (false, false) => m4f::rows9(wp, bp, xp, yp, O),
             }
             return y.assume_init();
         }
@@ -632,9 +612,9 @@ pub fn affine_tanh<const I: usize, const O: usize>(
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
     if std::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU has the FMA extension (checked just above; the check is cached).
-        return unsafe { x86::affine_tanh(w, b, x) };
+        return unsafe { layer_fma::<I, O, ACT>(w, b, x) };
     }
-    affine_tanh_portable(w, b, x)
+    layer_portable::<I, O, ACT>(w, b, x)
 }
 
 /// The host's dense layers with the x86-64 FMA extension (`vfmadd`), picked at run time: the
@@ -642,33 +622,17 @@ pub fn affine_tanh<const I: usize, const O: usize>(
 /// `-C target-feature=+fma` cannot inline it), some 3 ns each, about 3,000 a step. The same
 /// chains in the same order, each step one correctly rounded fma: the same bits (tests/fpu.rs
 /// checks them against the scalar chain).
+///
+/// # Safety
+/// The CPU must have the FMA extension.
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
-mod x86 {
-    /// [`super::affine`] with FMA instructions.
-    ///
-    /// # Safety
-    /// The CPU must have the FMA extension.
-    #[target_feature(enable = "fma")]
-    pub unsafe fn affine<const I: usize, const O: usize>(
-        w: &[[f32; I]; O],
-        b: &[f32; O],
-        x: &[f32; I],
-    ) -> [f32; O] {
-        super::affine_portable(w, b, x)
-    }
-
-    /// [`super::affine_tanh`] with FMA instructions.
-    ///
-    /// # Safety
-    /// The CPU must have the FMA extension.
-    #[target_feature(enable = "fma")]
-    pub unsafe fn affine_tanh<const I: usize, const O: usize>(
-        w: &[[f32; I]; O],
-        b: &[f32; O],
-        x: &[f32; I],
-    ) -> [f32; O] {
-        super::affine_tanh_portable(w, b, x)
-    }
+#[target_feature(enable = "fma")]
+unsafe fn layer_fma<const I: usize, const O: usize, const ACT: bool>(
+    w: &[[f32; I]; O],
+    b: &[f32; O],
+    x: &[f32; I],
+) -> [f32; O] {
+    layer_portable::<I, O, ACT>(w, b, x)
 }
 
 /// The composite law's measurement update (`adapt.rs`): the six rows of a diagonal-R
@@ -682,7 +646,7 @@ mod x86 {
 /// - e = zᵢ − h₀a₀ − h₁a₁ − … (unfused, in order), ν = e · (1/s), a_j ← fma(ph_j, ν, a_j);
 /// - k_j = ph_j · (1/s), P(j,c) ← fma(−k_j, ph_c, P(j,c)) for j ≤ c.
 ///
-/// On the M4F one assembly loop (about 120 instructions a row against some 250 for the
+/// On the M4F one assembly loop (about 130 instructions a row against some 240 for the
 /// compiler's code); the same sequence, and so the same bits, everywhere.
 #[inline]
 pub fn kalman_rows(

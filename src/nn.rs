@@ -177,9 +177,9 @@ impl<const I: usize, const H: usize, const O: usize> Mlp<I, H, O> {
 
     /// Forward pass and Jacobian–vector product: returns `(y, J dx)` with J = ∂y/∂x at `x`.
     pub fn jvp(&self, x: &[f32; I], dx: &[f32; I]) -> ([f32; O], [f32; O]) {
-        let h0 = map(self.l0.forward(x), tanh);
+        let h0 = self.l0.forward_tanh(x);
         let d0 = hadamard(&tanh_slope(&h0), &self.l0.linear(dx));
-        let h1 = map(self.l1.forward(&h0), tanh);
+        let h1 = self.l1.forward_tanh(&h0);
         let d1 = hadamard(&tanh_slope(&h1), &self.l1.linear(&d0));
         (self.l2.forward(&h1), self.l2.linear(&d1))
     }
@@ -187,8 +187,8 @@ impl<const I: usize, const H: usize, const O: usize> Mlp<I, H, O> {
     /// Forward pass and vector–Jacobian product: returns `(y, Jᵀ dy)`, the gradient of `dy · y`
     /// with respect to the input.
     pub fn vjp(&self, x: &[f32; I], dy: &[f32; O]) -> ([f32; O], [f32; I]) {
-        let h0 = map(self.l0.forward(x), tanh);
-        let h1 = map(self.l1.forward(&h0), tanh);
+        let h0 = self.l0.forward_tanh(x);
+        let h1 = self.l1.forward_tanh(&h0);
         let y = self.l2.forward(&h1);
         let g1 = hadamard(&tanh_slope(&h1), &self.l2.linear_transpose(dy));
         let g0 = hadamard(&tanh_slope(&h0), &self.l1.linear_transpose(&g1));
