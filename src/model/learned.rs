@@ -384,8 +384,14 @@ impl ModelWeights {
     /// the CF2X's, g the true input gain and W the nominal features (a world force along e_k, a
     /// body torque along e_k). Training starts near this point.
     pub fn prior() -> Self {
+        Self::prior_with_inertia(&Vector3::new(1.4e-5, 1.4e-5, 2.17e-5))
+    }
+
+    /// [`ModelWeights::prior`] with J = diag(`inertia_kg_m2`) instead of the CF2X's: the prior
+    /// of a described vehicle.
+    pub fn prior_with_inertia(inertia_kg_m2: &Vector3<f32>) -> Self {
         let mut w = Self::default();
-        w.inertia.l2.bias = l_for_diagonal_inertia(&Vector3::new(1.4e-5, 1.4e-5, 2.17e-5));
+        w.inertia.l2.bias = l_for_diagonal_inertia(inertia_kg_m2);
         w.gain.l2.bias = true_gain_output();
         w.disturbance.l2.bias = nominal_feature_bias();
         w
