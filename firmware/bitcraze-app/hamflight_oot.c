@@ -214,6 +214,7 @@ static uint32_t upLen;       /* announced by BEGIN */
 static uint32_t upStagedCrc; /* of the last upload that passed the commit check */
 static uint8_t upState = HF_UP_IDLE; /* HF_UP_*, changed with __atomic (memory task, stabilizer) */
 static uint8_t upError;
+static bool memRegistered;    /* the MEM_TYPE_APP handler is registered */
 static uint8_t revertRequest; /* parameter: write 1 to fly the compiled-in blob again */
 static volatile uint8_t job = HF_JOB_STEP;
 /* The active blob (logs blobSrc, blobCrc). */
@@ -639,10 +640,16 @@ void controllerOutOfTreeInit(void) {
     hf_get_composite(&ctl, &composite);
     enableCycleCounter();
     setActiveBuiltin();
-    /* Once, at the first init: with CONFIG_CONTROLLER_OOT the stabilizer auto-selects this
-     * controller in stabilizerInit(), after memInit() and before crtpMemInit() blocks the
-     * registration of memory handlers (crazyflie-firmware 2a18fc29, system.c). */
-    memoryRegisterHandler(&upMemDef);
+    /* Memory handlers may only be registered before crtpMemInit() (its task blocks further
+     * registrations, and a late one fails an ASSERT). With CONFIG_CONTROLLER_OOT the
+     * stabilizer auto-selects this controller in stabilizerInit(), which the system task runs
+     * after memInit() and before crtpMemInit() (crazyflie-firmware 2a18fc29, system.c): register
+     * there. A first init from any other task (the controller selected later by parameter)
+     * cannot register: the upload is then unavailable and the console says so. */
+    if (strcmp(pcTaskGetName(NULL), "SYSTEM") == 0) { /* SYSTEM_TASK_NAME, config.h */
+      memoryRegisterHandler(&upMemDef);
+      memRegistered = true;
+    }
     isInit = true;
   }
   /* A late step still running in the worker owns the controller: then only mark the phase; the
@@ -657,6 +664,9 @@ void controllerOutOfTreeInit(void) {
   DEBUG_PRINT("model %s crc %08X, %d g, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
               (int)(hf_mass_kg() * 1000.0f + 0.5f), (int)HAMFLIGHT_RATE_HZ);
   printActive();
+  if (!memRegistered) {
+    DEBUG_PRINT("weights upload unavailable: first selected after boot\n");
+  }
 }
 
 /* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
