@@ -101,6 +101,12 @@
 #error "HAMFLIGHT_RATE_HZ must be RATE_500_HZ or RATE_1000_HZ"
 #endif
 
+/* 1: the weights upload over the radio (MEM_TYPE_APP, "Upload" below; 19.4 KB of RAM);
+ * 0: compiled out (the revert parameter and the blob logs stay; the compiled-in blob flies). */
+#ifndef HAMFLIGHT_UPLOAD
+#define HAMFLIGHT_UPLOAD 1
+#endif
+
 /* The adaptation law at boot (the hamflight.law parameter's default): HF_LAW_GRADIENT or
  * HF_LAW_COMPOSITE. */
 #ifndef HAMFLIGHT_DEFAULT_LAW
@@ -207,14 +213,8 @@ enum {
 /* What the worker is asked to do. */
 enum { HF_JOB_STEP = 0, HF_JOB_LOAD = 1, HF_JOB_REVERT = 2 };
 
-/* RAM: the staging slot (HF_BLOB_MAX_BYTES) and the decoded model (HF_MODEL_STORAGE_BYTES). */
-static uint8_t staging[HF_BLOB_MAX_BYTES];
-static hf_model_t uploadedModel;
-static uint32_t upLen;       /* announced by BEGIN */
-static uint32_t upStagedCrc; /* of the last upload that passed the commit check */
 static uint8_t upState = HF_UP_IDLE; /* HF_UP_*, changed with __atomic (memory task, stabilizer) */
 static uint8_t upError;
-static bool memRegistered;    /* the MEM_TYPE_APP handler is registered */
 static uint8_t revertRequest; /* parameter: write 1 to fly the compiled-in blob again */
 static volatile uint8_t job = HF_JOB_STEP;
 /* The active blob (logs blobSrc, blobCrc). */
@@ -223,12 +223,20 @@ static uint32_t activeCrc;
 static float activeMassKg;
 static uint16_t activeVersion;
 
-static uint8_t upLoad(void) { return __atomic_load_n(&upState, __ATOMIC_SEQ_CST); }
-static void upStore(uint8_t v) { __atomic_store_n(&upState, v, __ATOMIC_SEQ_CST); }
 static bool upSwap(uint8_t from, uint8_t to) {
   return __atomic_compare_exchange_n(&upState, &from, to, false, __ATOMIC_SEQ_CST,
                                      __ATOMIC_SEQ_CST);
 }
+
+#if HAMFLIGHT_UPLOAD
+/* RAM: the staging slot (HF_BLOB_MAX_BYTES) and the decoded model (HF_MODEL_STORAGE_BYTES). */
+static uint8_t staging[HF_BLOB_MAX_BYTES];
+static hf_model_t uploadedModel;
+static uint32_t upLen;       /* announced by BEGIN */
+static uint32_t upStagedCrc; /* of the last upload that passed the commit check */
+static bool memRegistered;    /* the MEM_TYPE_APP handler is registered */
+static uint8_t upLoad(void) { return __atomic_load_n(&upState, __ATOMIC_SEQ_CST); }
+static void upStore(uint8_t v) { __atomic_store_n(&upState, v, __ATOMIC_SEQ_CST); }
 
 static void putU32(uint8_t *b, uint32_t v) {
   b[0] = (uint8_t)v;
@@ -349,6 +357,7 @@ static const MemoryHandlerDef_t upMemDef = {
     .read = upMemRead,
     .write = upMemWrite,
 };
+#endif /* HAMFLIGHT_UPLOAD */
 
 static void setActiveBuiltin(void) {
   activeSource = 0;
@@ -372,6 +381,7 @@ static void printActive(void) {
 static void serveSwap(void) {
   (void)hf_use_model(&ctl, NULL); /* nothing flies the slot while it is loaded */
   setActiveBuiltin();
+#if HAMFLIGHT_UPLOAD
   if (job == HF_JOB_LOAD) {
     hf_blob_info_t info;
     const uint32_t err = hf_model_load(&uploadedModel, staging, upLen, &info);
@@ -387,6 +397,7 @@ static void serveSwap(void) {
       DEBUG_PRINT("upload rejected at load: error %u\n", (unsigned int)err);
     }
   }
+#endif
   hf_get_gains(&ctl, &gains); /* the parameters follow the new model's gains */
   hf_set_adapt(&ctl, false);
   printActive();
@@ -646,10 +657,12 @@ void controllerOutOfTreeInit(void) {
      * after memInit() and before crtpMemInit() (crazyflie-firmware 2a18fc29, system.c): register
      * there. A first init from any other task (the controller selected later by parameter)
      * cannot register: the upload is then unavailable and the console says so. */
+#if HAMFLIGHT_UPLOAD
     if (strcmp(pcTaskGetName(NULL), "SYSTEM") == 0) { /* SYSTEM_TASK_NAME, config.h */
       memoryRegisterHandler(&upMemDef);
       memRegistered = true;
     }
+#endif
     isInit = true;
   }
   /* A late step still running in the worker owns the controller: then only mark the phase; the
@@ -664,9 +677,13 @@ void controllerOutOfTreeInit(void) {
   DEBUG_PRINT("model %s crc %08X, %d g, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
               (int)(hf_mass_kg() * 1000.0f + 0.5f), (int)HAMFLIGHT_RATE_HZ);
   printActive();
+#if HAMFLIGHT_UPLOAD
   if (!memRegistered) {
     DEBUG_PRINT("weights upload unavailable: first selected after boot\n");
   }
+#else
+  DEBUG_PRINT("weights upload compiled out (HAMFLIGHT_UPLOAD=0)\n");
+#endif
 }
 
 /* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
