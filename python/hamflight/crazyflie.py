@@ -364,7 +364,7 @@ def _connect(uri: str):
     except ImportError as e:  # pragma: no cover - the message is the point
         raise SystemExit(f"hamflight-cf needs cflib: pip install 'hamflight[crazyflie]' ({e})")
     cflib.crtp.init_drivers()
-    return SyncCrazyflie(uri, cf=Crazyflie(rw_cache="./cache"))
+    return SyncCrazyflie(uri, cf=Crazyflie())
 
 
 def _cmd_upload(args) -> int:
