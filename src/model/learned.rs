@@ -84,6 +84,11 @@ impl LearnedModel {
         }
     }
 
+    /// [`LearnedModel::with_motor_tau_s`] in place.
+    pub(crate) fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
+        self.motor_tau_bits = motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits();
+    }
+
     /// Decodes and checks a weight blob ([`blob::decode_model_into`]): the networks, the mass
     /// and the motor lag (the default for blobs before format version 3).
     ///
