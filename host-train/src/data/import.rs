@@ -943,7 +943,15 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
     };
     let sample_hz = 1.0 / dt;
     let mut ds = Dataset::new(sample_hz, mass_kg, gravity_m_s2, "import");
-    let tau = args.motor_tau_s.filter(|t| *t > 0.0);
+    // The lag filter realizes logged commands; measured rotor speeds are realized already.
+    let any_speeds = decoded.iter().any(|(_, _, d)| d.rotor_rad_s.is_some());
+    let tau = args
+        .motor_tau_s
+        .or(vehicle
+            .as_ref()
+            .and_then(|v| v.motor_tau_s)
+            .filter(|_| !any_speeds))
+        .filter(|t| *t > 0.0);
     ds.manifest.vehicle = dataset::VehicleDescription {
         inertia_kg_m2: inertia,
         rotor_efficiency,

@@ -62,7 +62,10 @@ pub fn scenario_toml(mass_kg: f64, vehicle: &VehicleDescription) -> String {
             d.thrust_to_weight * d.mass_kg / mass_kg
         ));
     }
-    if let Some(tau) = vehicle.motor_tau_s.filter(|t| *t > 0.0) {
+    let tau = vehicle
+        .motor_tau_s
+        .or(vehicle.description.as_ref().and_then(|d| d.motor_tau_s));
+    if let Some(tau) = tau.filter(|t| *t > 0.0) {
         s.push_str(&format!("[effects]\nmotor_tau_s = {tau:?}\n"));
     }
     s

@@ -10,7 +10,8 @@
 //! kf_n_per_rad_s2 = 3.7178e-8  # thrust per squared rotor speed
 //! km_nm_per_rad_s2 = 7.728e-11 # reaction torque per squared rotor speed
 //! thrust_to_weight = 2.0       # top rotor speed: all four carry this many weights
-//! motor_tau_s = 0.03           # optional first-order motor time constant
+//! motor_tau_s = 0.03           # optional: realizes logged commands at import (as --motor-tau-s),
+//!                              # and goes into the blob and the flight check's plant
 //! ```
 //!
 //! The rotor layout is the X of [`crate::sim::plant`]: rotor 1 front-right, 2 back-right,

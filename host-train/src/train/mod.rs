@@ -243,7 +243,8 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     })
 }
 
-/// The motor lag the blob carries: `--motor-tau-s`, else the manifest's, else the default.
+/// The motor lag the blob carries: `--motor-tau-s`, else the manifest's (the lag applied at
+/// import, else the vehicle description's), else the default.
 fn blob_motor_tau_s(
     cfg: &TrainConfig,
     vehicle: &crate::io::dataset::VehicleDescription,
@@ -251,6 +252,7 @@ fn blob_motor_tau_s(
     let tau = cfg
         .motor_tau_s
         .or(vehicle.motor_tau_s)
+        .or(vehicle.description.as_ref().and_then(|d| d.motor_tau_s))
         .map_or(hamflight::model::DEFAULT_MOTOR_TAU_S, |t| t as f32);
     let max = hamflight::model::MAX_MOTOR_TAU_S;
     if !(0.0..=max).contains(&tau) {
