@@ -179,6 +179,10 @@ pub struct ImportArgs {
     /// Decode uSD logs whose CRC does not match (for example cut short by a power loss).
     #[arg(long)]
     pub allow_bad_crc: bool,
+    /// Keep exactly repeated states (see "Messy logs"): for scoring on a log as a benchmark
+    /// protocol defines it, never for training.
+    #[arg(long)]
+    pub keep_repeated_states: bool,
 }
 
 impl ImportArgs {
@@ -205,6 +209,7 @@ impl ImportArgs {
             max_gap_s: 0.1,
             min_ground_s: 0.3,
             allow_bad_crc: false,
+            keep_repeated_states: false,
         }
     }
 }
@@ -931,7 +936,11 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
             }
             d.rotor_rad_s = Some(w);
         }
-        let repeated = drop_repeated_states(&mut d);
+        let repeated = if args.keep_repeated_states {
+            0
+        } else {
+            drop_repeated_states(&mut d)
+        };
         cleaning.push((repeated, glitches));
         decoded.push((*path, *calm, d));
     }
