@@ -284,6 +284,74 @@ def main():
     print(f"  gain {k:.4f} R2 {r2:.4f}; best shift {dbest[0][1]:+d} samples R2 {dbest[0][0]:.4f} (gain {dbest[0][2]:.4f})")
     facts["thrust"] = dict(gain=k, r2=r2, best_shift=dbest[0][1], best_shift_r2=dbest[0][0])
 
+    # airspeed-dependent moment: req ~ k mot + D v_body + c (5-box, motors one sample earlier)
+    print("== roll/pitch torque with a rotor aerodynamic moment linear in body velocity "
+          "(req ~ k mot + D v_body + c; 5-box smoothing, motors 1 sample earlier)")
+    aero = {}
+    for grp in ("square", "random", "multisine", ""):
+        Rs, Ms, Vs, Ks = [], [], [], []
+        for run, c in train.items():
+            if not run.startswith(grp):
+                continue
+            a, o, m = torque_data(c)
+            q = c[["qw", "qx", "qy", "qz"]].to_numpy()
+            Rm = nd.quat_to_rot(q / np.linalg.norm(q, axis=1, keepdims=True))
+            vb = np.einsum("nji,nj->ni", Rm, c[["vx_world_m_s", "vy_world_m_s", "vz_world_m_s"]].to_numpy())
+            Rs.append(smooth(a, 5)); Ms.append(smooth(np.roll(motor_torques(o), 1, 0), 5))
+            Vs.append(smooth(vb, 5)); Ks.append(m)
+        R_, M_, V_, K_ = (np.concatenate(x) for x in (Rs, Ms, Vs, Ks))
+        one = np.ones(len(R_))
+        row = {}
+        for i, ax in enumerate("xy"):
+            def lsq(X, y):
+                b = np.linalg.lstsq(X, y, rcond=None)[0]
+                return b, 1 - float(np.sum((y - X @ b) ** 2) / np.sum((y - y.mean()) ** 2))
+            b0, r0 = lsq(np.c_[M_[:, i], one][K_], R_[K_, i])
+            b1, r1 = lsq(np.c_[M_[:, i], V_, one][K_], R_[K_, i])
+            bm, rm = lsq(np.c_[V_, one][K_], M_[K_, i])  # how much of the motor torque is velocity
+            row[ax] = dict(k_plain=float(b0[0]), r2_plain=r0, k_aero=float(b1[0]), D_aero=b1[1:4].tolist(),
+                           r2_aero=r1, motor_from_v_r2=rm, motor_from_v=bm[:3].tolist())
+            print(f"  {grp or 'all train':10s} {ax}: plain k={b0[0]:.3f} (ratio {1/b0[0]:.1f}) R2={r0:.2f} | "
+                  f"with v_body k={b1[0]:.3f} (ratio {1/b1[0]:.1f}) R2={r1:.2f} | motor torque vs v_body: "
+                  f"R2={rm:.2f}, {np.round(np.array(bm[:3])*1e4, 1)}e-4 N m per m/s")
+        aero[grp or "all"] = row
+    facts["aero_moment"] = aero
+
+    # motor lag: per-motor normalised command (m*_thrust, unitless) -> measured Omega^2
+    if args.git_dir or args.checkout:
+        print("== motor lag: per-motor command m{1..4}_thrust (benchmark parquet, unitless) -> measured W^2; "
+              "first-order lag T, gain+offset per motor")
+        data = []
+        for run in train:
+            df = nd.read_run(args, run)
+            e = clean_erpm(df[["m1_erpm", "m2_erpm", "m3_erpm", "m4_erpm"]].to_numpy(float))
+            om = e * nd.ERPM_TO_RAD_S
+            mc = pd.DataFrame(df[["m1_thrust", "m2_thrust", "m3_thrust", "m4_thrust"]].to_numpy(float)).ffill().bfill().to_numpy()
+            ok = nd.KF * np.sum(om**2, 1) > 0.3 * nd.MASS * nd.G
+            ok[:50] = False
+            data.append((mc, om, ok))
+        grid = {}
+        for Tm in np.arange(0.0, 0.0801, 0.0025):
+            xs = np.concatenate([lag_filter(mc, Tm) if Tm > 0 else np.roll(mc, 1, 0) for mc, _, _ in data])
+            k_ = np.concatenate([ok for _, _, ok in data])
+            r2s = {}
+            for pw in (1, 2):
+                ys = np.concatenate([om**pw for _, om, _ in data])
+                r = []
+                for j in range(4):
+                    X = np.c_[xs[:, j], np.ones(len(xs))][k_]
+                    b = np.linalg.lstsq(X, ys[k_, j], rcond=None)[0]
+                    y = ys[k_, j]
+                    r.append(1 - float(np.sum((y - X @ b) ** 2) / np.sum((y - y.mean()) ** 2)))
+                r2s[pw] = float(np.mean(r))
+            grid[round(float(Tm), 4)] = r2s
+        for pw in (1, 2):
+            Tb = max(grid, key=lambda T: grid[T][pw])
+            print(f"  target W^{pw}: best T = {Tb*1e3:.1f} ms (mean R2 over motors {grid[Tb][pw]:.3f}; "
+                  f"T=10 ms {grid[0.01][pw]:.3f}, T=50 ms {grid[0.05][pw]:.3f})")
+            facts[f"motor_lag_omega{pw}"] = dict(T=Tb, r2=grid[Tb][pw])
+        facts["motor_lag_grid"] = {str(k): v for k, v in grid.items()}
+
     if args.out:
         with open(args.out, "w") as f:
             json.dump(facts, f, indent=1)
