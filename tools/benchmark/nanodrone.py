@@ -245,7 +245,8 @@ def main():
     ap.add_argument("--out", required=True, help="output folder (outside the hamflight repository)")
     ap.add_argument("--with-corrupt", action="store_true", help="also write melon run2 to <out>/excluded/")
     ap.add_argument("--motor-tau-s", type=float, default=None,
-                    help="motor time constant to write into vehicle.toml (see analyze.py)")
+                    help="motor time constant (command -> measured speed, analyze.py finds 0.0325) to write into "
+                         "vehicle.toml; omitted by default, because the CSVs carry measured speeds that must not be lagged again")
     args = ap.parse_args()
 
     out = os.path.abspath(args.out)
@@ -263,12 +264,12 @@ def main():
         for run in runs:
             df = read_run(args, run)
             c = convert(df)
-            c.to_csv(os.path.join(out, split, run + ".csv"), index=False, float_format="%.9g", na_rep="nan")
+            c.to_csv(os.path.join(out, split, run + ".csv"), index=False, float_format="%.9g", na_rep="")
             reports.append((split, sanity(run, df, c)))
 
     tw = max(r["tw_max"] for s, r in reports if s != "excluded")
     tau_line = (
-        f"motor_tau_s = {args.motor_tau_s:.4f}       # first-order rotor lag, fitted by tools/benchmark/analyze.py\n"
+        f"motor_tau_s = {args.motor_tau_s:.4f}       # command -> MEASURED rotor speed lag (analyze.py); the eRPM columns are measured: do not lag them again\n"
         if args.motor_tau_s is not None
         else ""
     )

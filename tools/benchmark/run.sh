@@ -29,8 +29,9 @@ case "$(realpath -m "$work")/" in "$repo"/*) echo "WORK_DIR must be outside the 
 mkdir -p "$work"
 
 echo "== 1. convert"
+# no --motor-tau-s: the CSVs carry MEASURED rotor speeds, which must not go through a motor lag again
 if [ -n "${NANODRONE_CHECKOUT:-}" ]; then src=(--checkout "$NANODRONE_CHECKOUT"); else src=(--git-dir "$GIT_DIR_NANO"); fi
-"$PY" "$here/nanodrone.py" "${src[@]}" --commit "$COMMIT" --out "$work/csv" --motor-tau-s 0.0325 | tee "$work/convert.log"
+"$PY" "$here/nanodrone.py" "${src[@]}" --commit "$COMMIT" --out "$work/csv" | tee "$work/convert.log"
 
 echo "== 2. reference score (Python, no training)"
 "$PY" "$here/reference_score.py" --csv "$work/csv" --out "$work/reference_score.json" | tee "$work/reference_score.log"
