@@ -220,6 +220,13 @@ def evaluate(model, runs):
         counts += W
         pooled_t1.append((p[1:1 + W], v[1:1 + W], q[1:1 + W], w[1:1 + W]))
     clean = {k: (v / counts).tolist() for k, v in clean.items()}
+    per_run = []
+    for run in runs:  # the clean errors of each run alone
+        p, v, q, w, _ = run
+        W = len(p) - H
+        preds = score_run(model, run)
+        e = [errors(preds[h - 1], (p[h:h + W], v[h:h + W], q[h:h + W], w[h:h + W])) for h in range(1, H + 1)]
+        per_run.append({k: [float(x[k].mean()) for x in e] for k in clean})
     # protocol: concatenate windows, shift the 1-step truth
     t1 = tuple(np.concatenate([t[i] for t in pooled_t1]) for i in range(4))
     proto = {k: [] for k in clean}
@@ -229,7 +236,7 @@ def evaluate(model, runs):
         e = errors(tuple(x[:n] for x in pr), tuple(x[h - 1:h - 1 + n] for x in t1))
         for k in proto:
             proto[k].append(float(e[k].mean()))
-    return dict(clean=clean, protocol=proto, windows=counts)
+    return dict(clean=clean, protocol=proto, windows=counts, per_run=per_run)
 
 
 def main():
