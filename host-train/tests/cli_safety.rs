@@ -72,7 +72,22 @@ fn import_requires_the_vehicle_mass() {
     let ok = Import::try_parse_from(["import", "--out", "D", "w0", "--mass-kg", "0.034"])
         .expect("parses")
         .args;
-    assert!((ok.mass_kg - 0.034).abs() < 1e-12);
+    assert_eq!(ok.mass_kg, Some(0.034));
+    // A vehicle description carries the mass instead.
+    let v = Import::try_parse_from(["import", "--out", "D", "w0", "--vehicle", "cf2x"])
+        .expect("a vehicle file stands in for --mass-kg")
+        .args;
+    assert_eq!(v.mass_kg, None);
+    assert_eq!(v.vehicle.as_deref(), Some(std::path::Path::new("cf2x")));
+}
+
+#[test]
+fn import_new_matches_the_command_line_defaults() {
+    let parsed = Import::try_parse_from(["import", "--out", "D", "--mass-kg", "0.027"])
+        .expect("parses")
+        .args;
+    let built = host_train::data::import::ImportArgs::new("D".into(), 0.027);
+    assert_eq!(format!("{parsed:?}"), format!("{built:?}"));
 }
 
 #[test]

@@ -21,6 +21,7 @@ fn cf2x() -> VehicleDescription {
         inertia_kg_m2: Some([1.4e-5, 1.4e-5, 2.17e-5]),
         rotor_efficiency: Some([1.0; 4]),
         motor_tau_s: None,
+        description: None,
     }
 }
 
@@ -112,6 +113,7 @@ fn the_check_flies_the_described_vehicle() {
         inertia_kg_m2: Some([1.82e-5, 1.82e-5, 2.82e-5]),
         rotor_efficiency: Some([1.0, 1.0, 0.9, 1.0]),
         motor_tau_s: Some(0.02),
+        description: None,
     };
     let toml = check::scenario_toml(0.034, &heavy);
     for key in [

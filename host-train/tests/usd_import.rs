@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use host_train::data::import::{self, ImportArgs, LogFormat};
+use host_train::data::import::{self, ImportArgs};
 
 use host_train::fly::usdrecord::{logged_vars, UsdRecorder};
 use host_train::io::usdlog::LEE_COMMAND_VARS;
@@ -46,22 +46,7 @@ fn sitl_log(name: &str, duration_s: f64) -> (Vec<u8>, Vec<(u64, [f64; 20])>) {
 }
 
 fn args(out: &Path) -> ImportArgs {
-    ImportArgs {
-        out: out.to_path_buf(),
-        logs: Vec::new(),
-        calm: Vec::new(),
-        format: LogFormat::Auto,
-        mass_kg: 0.027,
-        gravity_m_s2: 9.8,
-        inertia_kg_m2: None,
-        rotor_efficiency: None,
-        motor_tau_s: None,
-        command_vars: LEE_COMMAND_VARS.map(String::from).to_vec(),
-        min_height_m: 0.1,
-        min_thrust_frac: 0.25,
-        trim_s: 0.5,
-        allow_bad_crc: false,
-    }
+    ImportArgs::new(out.to_path_buf(), 0.027)
 }
 
 #[test]
@@ -94,6 +79,7 @@ fn sitl_usd_log_round_trips_exactly() {
         Path::new("sitl.bin"),
         &bytes,
         &LEE_COMMAND_VARS.map(String::from),
+        &[],
         ParseOptions::default(),
     )
     .unwrap();
@@ -244,6 +230,7 @@ fn unknown_event_types_are_skipped_and_counted_and_undeclared_ids_rejected() {
         Path::new("x.bin"),
         &bytes2,
         &LEE_COMMAND_VARS.map(String::from),
+        &[],
         ParseOptions::default(),
     )
     .unwrap();
@@ -271,6 +258,7 @@ fn unknown_event_types_are_skipped_and_counted_and_undeclared_ids_rejected() {
         Path::new("small.bin"),
         &small_log(),
         &LEE_COMMAND_VARS.map(String::from),
+        &[],
         ParseOptions::default(),
     )
     .unwrap_err()
@@ -341,8 +329,8 @@ fn randomized_and_mutated_logs_never_panic() {
                 err += 1;
             }
         }
-        let _ = import::decode_usd(Path::new("fuzz.bin"), &b, &cmd, lax);
-        let _ = import::decode_csv(Path::new("fuzz.csv"), &b);
+        let _ = import::decode_usd(Path::new("fuzz.bin"), &b, &cmd, &[], lax);
+        let _ = import::decode_csv(Path::new("fuzz.csv"), &b, Some(12));
     }
     eprintln!("6000 inputs: {ok} decoded, {err} rejected");
     assert!(ok > 500 && err > 500, "{ok} decoded, {err} rejected");
@@ -575,7 +563,24 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
             (s[0].t_s, s[s.len() - 1].t_s, s.len())
         })
         .collect();
-    // Airborne 1.0–2.498 s and 2.55–3.998 s; 0.5 s off each end of each stretch.
+    // The 50 ms gap (dropped packets) stays inside the flight: airborne 1.0–3.998 s, 0.5 s
+    // off each end, 25 samples missing.
+    assert_eq!(spans.len(), 1, "{spans:?}");
+    assert!((spans[0].0 - 1.5).abs() < 1e-9 && (spans[0].1 - 3.498).abs() < 1e-9);
+    assert_eq!(spans[0].2, 1000 - 25);
+    // A gap longer than --max-gap-s ends the flight: airborne 1.0–2.498 s and 2.55–3.998 s.
+    let a = ImportArgs {
+        max_gap_s: 0.02,
+        ..a
+    };
+    let flights = import::airborne_flights(&samples, 500.0, &a);
+    let spans: Vec<(f64, f64, usize)> = flights
+        .iter()
+        .map(|f| {
+            let s = &f.samples;
+            (s[0].t_s, s[s.len() - 1].t_s, s.len())
+        })
+        .collect();
     assert_eq!(spans.len(), 2, "{spans:?}");
     assert!((spans[0].0 - 1.5).abs() < 1e-9 && (spans[0].1 - 1.998).abs() < 1e-9);
     assert!((spans[1].0 - 3.05).abs() < 1e-9 && (spans[1].1 - 3.498).abs() < 1e-9);

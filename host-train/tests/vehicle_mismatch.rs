@@ -296,22 +296,12 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
 
 fn import_args(out: &Path, log: &Path) -> host_train::data::import::ImportArgs {
     host_train::data::import::ImportArgs {
-        out: out.to_path_buf(),
         logs: vec![log.to_path_buf()],
-        calm: Vec::new(),
-        format: host_train::data::import::LogFormat::Auto,
-        mass_kg: 0.034,
-        gravity_m_s2: 9.8,
+        gravity_m_s2: Some(9.8),
         inertia_kg_m2: Some(vec![1.82e-5, 1.82e-5, 2.821e-5]),
         rotor_efficiency: Some(vec![1.0, 1.0, 0.9, 1.0]),
         motor_tau_s: Some(0.02),
-        command_vars: host_train::io::usdlog::LEE_COMMAND_VARS
-            .map(String::from)
-            .to_vec(),
-        min_height_m: 0.1,
-        min_thrust_frac: 0.25,
-        trim_s: 0.5,
-        allow_bad_crc: false,
+        ..host_train::data::import::ImportArgs::new(out.to_path_buf(), 0.034)
     }
 }
 

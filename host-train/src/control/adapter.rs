@@ -4,9 +4,10 @@
 //! the command line knows them by are [`super::registry`]'s.
 
 use crate::control::controller::Controller;
-use crate::sim::plant::PlantState;
+use crate::sim::plant::{PlantState, VehicleParams};
 use crate::sim::trajectory::TrajectoryPoint;
 use anyhow::{Context, Result};
+use hamflight::mixer::Airframe;
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
 use hamflight::AdaptationLaw;
 use hamflight::{FlightController, Gains, Measurement, Output, Setpoint, State, VehicleFacts};
@@ -48,6 +49,16 @@ pub fn gains_for(model: &LearnedModel) -> Gains {
     Gains::for_vehicle(&VehicleFacts::of(model))
 }
 
+/// The core mixer's airframe for the plant's vehicle (its geometry, coefficients and top speed).
+pub fn airframe_of(v: &VehicleParams) -> Airframe {
+    Airframe {
+        arm_xy_m: v.arm_xy_m as f32,
+        kf_n_per_rpm2: v.kf_n_per_rpm2 as f32,
+        km_nm_per_rpm2: v.km_nm_per_rpm2 as f32,
+        max_rpm: v.max_rpm() as f32,
+    }
+}
+
 /// Adapts a core [`FlightController`] to the host [`Controller`] trait.
 pub struct CoreController<M> {
     name: String,
@@ -63,6 +74,11 @@ impl<M: HamiltonianModel> CoreController<M> {
             inner: FlightController::new(model, gains),
             last: None,
         }
+    }
+
+    /// Mixes for `airframe` instead of the CF2X's.
+    pub fn set_airframe(&mut self, airframe: Airframe) {
+        self.inner.airframe = airframe;
     }
 
     /// The wrapped core controller.

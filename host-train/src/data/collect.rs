@@ -279,6 +279,7 @@ pub fn collect(out: &Path, c: &CollectConfig) -> Result<Manifest> {
         inertia_kg_m2: Some(params.inertia_kg_m2),
         rotor_efficiency: Some(params.rotor_efficiency),
         motor_tau_s: None,
+        description: None,
     };
     for j in 0..total {
         let (dist, flights) = collect_realization(c, j, &params, || pb.inc(1))?;

@@ -27,7 +27,8 @@
 //!   the training report's "true" values (omitted there when unknown): `inertia_kg_m2` diag(J)
 //!   (kg·m²); `rotor_efficiency` the vehicle's own rotor thrust factors δ₁..δ₄; `motor_tau_s`
 //!   the first-order motor time constant the stored commands were passed through at import (the
-//!   stored command is then the *realized* one, see [`crate::data::import`]; null: stored as logged).
+//!   stored command is then the *realized* one, see [`crate::data::import`]; null: stored as logged);
+//!   `description` the whole vehicle file given to `import --vehicle` ([`crate::sim::vehicle`]).
 //! - `source_file`: for imports, the log the realization came from.
 //! - `wind_m_s2`, `rotor_efficiency`: the true disturbance (world specific force, m/s²; δ₁..δ₄)
 //!   when known (collection), else null.
@@ -123,6 +124,9 @@ pub struct VehicleDescription {
     pub rotor_efficiency: Option<[f64; 4]>,
     /// First-order motor time constant (s) the stored commands were filtered with at import.
     pub motor_tau_s: Option<f64>,
+    /// The whole vehicle description the data was imported with (`import --vehicle`): its
+    /// airframe builds the flight check's plant and mixer, its inertia the training prior.
+    pub description: Option<crate::sim::vehicle::VehicleFile>,
 }
 
 /// One realization's entry in the manifest.

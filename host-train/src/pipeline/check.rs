@@ -11,7 +11,7 @@
 //! check. The core's normalized gradient law already makes the adaptation's rates hold for any
 //! scale of learned features; this check is the end-to-end guard on top of it.
 
-use crate::control::adapter::{gains_for, CoreController};
+use crate::control::adapter::{airframe_of, gains_for, CoreController};
 use crate::fly::eval::{self, Report};
 use crate::io::dataset::VehicleDescription;
 use crate::sim::scenario::Scenario;
@@ -50,6 +50,17 @@ pub fn scenario_toml(mass_kg: f64, vehicle: &VehicleDescription) -> String {
     }
     if let Some(e) = vehicle.rotor_efficiency {
         s.push_str(&format!("rotor_efficiency = {e:?}\n"));
+    }
+    if let Some(d) = &vehicle.description {
+        s.push_str(&format!(
+            "gravity_m_s2 = {:?}\narm_xy_m = {:?}\nkf_n_per_rad_s2 = {:?}\n\
+             km_nm_per_rad_s2 = {:?}\nthrust_to_weight = {:?}\n",
+            d.gravity_m_s2,
+            d.arm_xy_m,
+            d.kf_n_per_rad_s2,
+            d.km_nm_per_rad_s2,
+            d.thrust_to_weight * d.mass_kg / mass_kg
+        ));
     }
     if let Some(tau) = vehicle.motor_tau_s.filter(|t| *t > 0.0) {
         s.push_str(&format!("[effects]\nmotor_tau_s = {tau:?}\n"));
@@ -181,6 +192,10 @@ pub fn run_model(
         ];
         for (law, gains) in laws {
             let mut c = CoreController::new("check", model, gains);
+            if vehicle.description.is_some() {
+                // The mixer of the described airframe, as the vehicle's own firmware has it.
+                c.set_airframe(airframe_of(&sc.vehicle));
+            }
             let r = Report::from_log(&eval::fly(&sc, &mut c), None);
             flights.push(CheckFlight {
                 scenario: name.to_string(),

@@ -36,7 +36,6 @@ use crate::data::import::{self, ImportArgs, LogFormat};
 use crate::fly::eval::{self, Report};
 use crate::fly::usdrecord::UsdRecorder;
 use crate::io::files::{write_atomic, write_json_atomic};
-use crate::io::usdlog::LEE_COMMAND_VARS;
 use crate::pipeline::train as pipeline_train;
 use crate::sim::plant::{WindSine, WindStep};
 use crate::sim::scenario::{DisturbanceSpec, Scenario, Trajectory};
@@ -484,20 +483,14 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     let tau = base.spec.effects.motor_tau_s;
     let data_dir = args.out.join("data");
     let imp = ImportArgs {
-        out: data_dir.clone(),
         logs: windy_logs,
         calm: calm_logs,
         format: LogFormat::Usd,
-        mass_kg: v.mass_kg,
-        gravity_m_s2: v.gravity_m_s2,
+        gravity_m_s2: Some(v.gravity_m_s2),
         inertia_kg_m2: Some(v.inertia_kg_m2.to_vec()),
         rotor_efficiency: Some(v.rotor_efficiency.to_vec()),
         motor_tau_s: (tau > 0.0).then_some(tau),
-        command_vars: LEE_COMMAND_VARS.map(String::from).to_vec(),
-        min_height_m: 0.10,
-        min_thrust_frac: 0.25,
-        trim_s: 0.5,
-        allow_bad_crc: false,
+        ..ImportArgs::new(data_dir.clone(), v.mass_kg)
     };
     let summaries = import::run(&imp)?;
     // import orders the windy logs first, then the calm ones.

@@ -5,3 +5,4 @@ pub mod plant;
 pub mod scenario;
 pub mod sensors;
 pub mod trajectory;
+pub mod vehicle;

@@ -52,6 +52,8 @@
 //! inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.821e-5]  # diag(J) (kg·m²)
 //! rotor_efficiency = [1.0, 1.0, 0.9, 1.0]  # the vehicle's own rotors, in (0, 2], always on;
 //!                                # multiplies `disturbance.rotor_efficiency`
+//! # and, for another airframe (`crate::sim::vehicle`'s keys): gravity_m_s2, arm_xy_m,
+//! # kf_n_per_rad_s2, km_nm_per_rad_s2, thrust_to_weight (top thrust over weight)
 //!
 //! [sensors]                      # optional; absent = the controller sees the (noisy) truth
 //!                                # the Crazyflie's IMU, filters, pose source and EKF in the
@@ -191,6 +193,17 @@ pub struct VehicleSpec {
     pub inertia_kg_m2: Option<[f64; 3]>,
     /// The vehicle's own rotor efficiencies (always on).
     pub rotor_efficiency: Option<[f64; 4]>,
+    /// Gravity (m/s²).
+    pub gravity_m_s2: Option<f64>,
+    /// Rotor offset along each body axis (m), X layout.
+    pub arm_xy_m: Option<f64>,
+    /// Thrust coefficient k_F (N per (rad/s)²).
+    pub kf_n_per_rad_s2: Option<f64>,
+    /// Reaction-torque coefficient k_M (N·m per (rad/s)²).
+    pub km_nm_per_rad_s2: Option<f64>,
+    /// Top total thrust over weight (sets the top rotor speed). Without it a new mass keeps
+    /// the CF2X's top rotor speed.
+    pub thrust_to_weight: Option<f64>,
 }
 
 impl VehicleSpec {
@@ -208,6 +221,23 @@ impl VehicleSpec {
         }
         if let Some(e) = self.rotor_efficiency {
             v.rotor_efficiency = e;
+        }
+        let per_rad = crate::sim::vehicle::RPM_PER_RAD_S.powi(2);
+        if let Some(g) = self.gravity_m_s2 {
+            v.gravity_m_s2 = g;
+        }
+        if let Some(a) = self.arm_xy_m {
+            v.arm_xy_m = a;
+        }
+        if let Some(kf) = self.kf_n_per_rad_s2 {
+            // The top thrust (thrust_to_weight) stays; the top rotor speed follows k_F.
+            v.kf_n_per_rpm2 = kf / per_rad;
+        }
+        if let Some(km) = self.km_nm_per_rad_s2 {
+            v.km_nm_per_rpm2 = km / per_rad;
+        }
+        if let Some(t) = self.thrust_to_weight {
+            v.thrust_to_weight = t;
         }
         v
     }
@@ -652,6 +682,21 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
         .is_some_and(|e| !e.iter().all(|x| x.is_finite() && *x > 0.0 && *x <= 2.0))
     {
         bail!("key `vehicle.rotor_efficiency`: expected four numbers in (0, 2]");
+    }
+    for (k, x) in [
+        ("gravity_m_s2", v.gravity_m_s2),
+        ("arm_xy_m", v.arm_xy_m),
+        ("kf_n_per_rad_s2", v.kf_n_per_rad_s2),
+        ("km_nm_per_rad_s2", v.km_nm_per_rad_s2),
+    ] {
+        if x.is_some_and(|x| !(x.is_finite() && x > 0.0)) {
+            bail!("key `vehicle.{k}`: expected a positive number");
+        }
+    }
+    if v.thrust_to_weight
+        .is_some_and(|t| !(t.is_finite() && t > 1.0))
+    {
+        bail!("key `vehicle.thrust_to_weight`: expected a number above 1");
     }
     if let Some(st) = &s.start {
         if !finite_all(&st.position_m)
