@@ -264,7 +264,7 @@ def main():
         for run in runs:
             df = read_run(args, run)
             c = convert(df)
-            c.to_csv(os.path.join(out, split, run + ".csv"), index=False, float_format="%.9g", na_rep="")
+            c.to_csv(os.path.join(out, split, run + ".csv"), index=False, float_format="%.9g", na_rep="nan")
             reports.append((split, sanity(run, df, c)))
 
     tw = max(r["tw_max"] for s, r in reports if s != "excluded")
