@@ -50,7 +50,8 @@ export PATH="$VENV/bin:$PATH"
 "$VENV/bin/python" -m pip install -q "maturin>=1.9,<2"
 "$VENV/bin/python" -m pip install -q --no-build-isolation ./python
 lap "wheel built and installed"
-"$VENV/bin/python" -m pip install -q pytest rotorpy ray
+# cflib: the optional `crazyflie` extra, for tests/test_crazyflie.py (hamflight-cf).
+"$VENV/bin/python" -m pip install -q pytest rotorpy ray cflib
 lap "test dependencies installed"
 
 # Run from outside the source tree so the installed package is the one imported.

@@ -40,6 +40,9 @@ pub const OLDEST_VERSION: u16 = 1;
 pub const HEADER_LEN: usize = 28;
 /// Size of the trailing checksum.
 pub const CRC_LEN: usize = 4;
+/// The largest blob this build reads: a current-version one (the mass, the motor lag and
+/// every network parameter, 4 bytes each). Older versions are shorter.
+pub const MAX_LEN: usize = HEADER_LEN + 4 * (2 + ModelWeights::PARAMS) + CRC_LEN;
 
 /// Why a blob was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -176,12 +179,53 @@ pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError
 /// As [`decode_into`].
 pub fn decode_model_into(bytes: &[u8], out: &mut LearnedModel) -> Result<(), BlobError> {
     let tau = decode_checked(bytes, &mut out.weights)?;
-    *out = out.with_motor_tau_s(tau);
+    // In place: a by-value copy of the model would put 10 KB on a firmware's stack.
+    out.set_motor_tau_s(tau);
     Ok(())
+}
+
+/// What [`check`] reports of a blob that passed every check of [`decode`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BlobInfo {
+    /// The format version it was written with.
+    pub version: u16,
+    /// The whole blob's length in bytes (header, body, CRC).
+    pub total_len: usize,
+    /// The CRC-32 of the body, as stored in the blob.
+    pub crc: u32,
+    /// The vehicle's mass (kg).
+    pub mass_kg: f32,
+    /// The motor time constant (s).
+    pub motor_tau_s: f32,
+}
+
+/// Runs every check of [`decode`] without decoding: for a firmware that receives a blob into a
+/// buffer and must reject a bad one before it touches the model it flies.
+///
+/// # Errors
+/// As [`decode_into`].
+pub fn check(bytes: &[u8]) -> Result<BlobInfo, BlobError> {
+    parse(bytes).map(|p| p.info)
+}
+
+/// A blob that passed every check: its facts and its network parameters.
+struct Parsed<'a> {
+    info: BlobInfo,
+    params: &'a [[u8; 4]],
 }
 
 /// [`decode_into`], returning the blob's motor lag (s).
 fn decode_checked(bytes: &[u8], out: &mut ModelWeights) -> Result<f32, BlobError> {
+    let p = parse(bytes)?;
+    out.mass_kg = p.info.mass_kg;
+    for (slot, b) in out.params_mut().zip(p.params) {
+        *slot = f32::from_le_bytes(*b);
+    }
+    Ok(p.info.motor_tau_s)
+}
+
+/// Every check, in file order (see [`decode_into`]); writes nothing.
+fn parse(bytes: &[u8]) -> Result<Parsed<'_>, BlobError> {
     let prefix = expected_prefix();
     let magic = bytes.get(..4).ok_or(BlobError::Truncated)?;
     if magic != MAGIC {
@@ -248,11 +292,16 @@ fn decode_checked(bytes: &[u8], out: &mut ModelWeights) -> Result<f32, BlobError
     if !(0.0..=MAX_MOTOR_TAU_S).contains(&motor_tau_s) {
         return Err(BlobError::BadMotorTau);
     }
-    out.mass_kg = mass_kg;
-    for (slot, b) in out.params_mut().zip(params) {
-        *slot = f32::from_le_bytes(*b);
-    }
-    Ok(motor_tau_s)
+    Ok(Parsed {
+        info: BlobInfo {
+            version,
+            total_len: total,
+            crc: stored_crc,
+            mass_kg,
+            motor_tau_s,
+        },
+        params,
+    })
 }
 
 /// Encodes weights as a blob (host side), with the default motor lag ([`DEFAULT_MOTOR_TAU_S`]).
@@ -313,6 +362,29 @@ pub fn crc32(data: &[u8]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn check_agrees_with_decode_and_writes_nothing() {
+        let bytes = include_bytes!("../weights/default.hfw");
+        let info = check(bytes).expect("the shipped blob passes");
+        let w = decode(bytes).expect("and decodes");
+        assert_eq!(info.mass_kg, w.mass_kg);
+        assert_eq!(
+            (info.version, info.total_len),
+            (FORMAT_VERSION, bytes.len())
+        );
+        assert_eq!(
+            bytes.len(),
+            MAX_LEN,
+            "a current-version blob has the largest size"
+        );
+        let body = &bytes[HEADER_LEN..bytes.len() - CRC_LEN];
+        assert_eq!(info.crc, crc32(body));
+        let mut bad = bytes.to_vec();
+        bad[HEADER_LEN + 9] ^= 1;
+        assert_eq!(check(&bad), Err(BlobError::Checksum));
+        assert_eq!(check(&bytes[..bytes.len() - 1]), Err(BlobError::Truncated));
+    }
 
     #[test]
     fn crc32_check_value() {

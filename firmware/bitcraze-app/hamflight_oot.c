@@ -57,6 +57,12 @@
  * law (0 the paper's gradient law, 1 the composite law; a write takes effect only while not
  * airborne, and resets a), qF qT rF rT (the composite law's Q and R: force and torque columns
  * and rows, in a's units; refused values revert).
+ *
+ * Weights over the radio (MEM_TYPE_APP, see "Upload" below and README.md): a client writes a
+ * weight blob into a RAM staging slot; the memory task checks it at the commit; the worker
+ * decodes it, self-tests it and makes it fly at the first tick the controller is not airborne.
+ * Parameter revert (write 1) goes back to the compiled-in blob the same way. RAM only: every
+ * boot flies the compiled-in blob.
  * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
  * 2 thrust, 3 tilt limit), phase (0 off, 1 ground, 2 airborne), thrust (N), tx ty tz (N*m),
  * cycles (DWT cycles of the last hf_step), law (the law in use), e0..e5 (the composite law's
@@ -66,6 +72,7 @@
 #include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
+#include <string.h>
 
 /* controller.h declares the OOT entry points under CONFIG_CONTROLLER_OOT. */
 #include "autoconf.h"
@@ -74,6 +81,7 @@
 #include "app.h"
 #include "controller.h"
 #include "log.h"
+#include "mem.h"
 #include "param.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
@@ -93,6 +101,12 @@
 #error "HAMFLIGHT_RATE_HZ must be RATE_500_HZ or RATE_1000_HZ"
 #endif
 
+/* 1: the weights upload over the radio (MEM_TYPE_APP, "Upload" below; 19.4 KB of RAM);
+ * 0: compiled out (the revert parameter and the blob logs stay; the compiled-in blob flies). */
+#ifndef HAMFLIGHT_UPLOAD
+#define HAMFLIGHT_UPLOAD 1
+#endif
+
 /* The adaptation law at boot (the hamflight.law parameter's default): HF_LAW_GRADIENT or
  * HF_LAW_COMPOSITE. */
 #ifndef HAMFLIGHT_DEFAULT_LAW
@@ -110,6 +124,9 @@
 
 /* Shim-level fault bit of the faults log: the worker did not return the step in time. */
 #define HF_SHIM_WORKER_TIMEOUT (1u << 16)
+/* Shim-level bit of the faults log: the worker is swapping the model (zero output, on the
+ * ground only). */
+#define HF_SHIM_SWAPPING (1u << 17)
 /* How long the stabilizer waits for the worker, in FreeRTOS ticks of 1 ms: 2, because a
  * 1-tick timeout ends at the next tick interrupt, which may come at once. */
 #define HF_WORKER_TIMEOUT_TICKS 2
@@ -147,6 +164,245 @@ static uint8_t logLaw;
 static float logEps[6];
 static float logPTrace;
 
+/* ---- Upload: weights over the radio (MEM_TYPE_APP) ----
+ *
+ * Address layout of the memory (little-endian; cflib: cf.mem.get_mems(MemoryElement.TYPE_APP),
+ * cf.mem.read / cf.mem.write, 24 bytes per packet):
+ *   0x0000..0x003F  info, read-only (HF_UP_INFO_BYTES):
+ *     0x00 u32 magic "HFUP"     0x04 u16 layout version (1)
+ *     0x06 u8  active source (0 compiled-in, 1 uploaded)
+ *     0x07 u8  upload state (HF_UP_*)        0x08 u32 active blob's CRC-32
+ *     0x0C f32 active mass (kg)              0x10 u16 active blob's format version
+ *     0x12 u8  last error (HF_ERR_BLOB_*, HF_ERR_SELF_TEST; 0 none)   0x13 u8 zero
+ *     0x14 u32 staging capacity (HF_BLOB_MAX_BYTES)
+ *     0x18 u32 length announced by the last BEGIN
+ *     0x1C u32 CRC-32 of the last upload that passed the commit check (0 none)
+ *     0x20 char[32] active blob's name, NUL-padded ("uploaded" for an upload)
+ *   0x0040          control, write-only, one packet each:
+ *     01 + u32 len  BEGIN: a new upload of len bytes (1..capacity); the staging slot is zeroed
+ *     02            COMMIT: every byte has been sent; the memory task checks the staged bytes
+ *                   (hf_blob_check: format, CRC, length, finiteness, mass, motor lag)
+ *   0x1000 + off    data: writes fill staging[off..] (only between BEGIN and COMMIT, inside
+ *                   len; any order, repeats allowed); reads give the staging slot (the last
+ *                   upload's bytes, which fly while the source is "uploaded").
+ * The end of an upload is the COMMIT, not a byte count: a chunk that never arrived is a zero
+ * in the slot and fails the CRC (a torn upload), and a blob whose own header length disagrees
+ * with len fails the length check. Writes are refused (EIO to the client) outside a session
+ * or the window and while the worker is swapping.
+ * States: IDLE -> BEGIN -> RECEIVING -> COMMIT -> PENDING (checked) or REJECTED; PENDING ->
+ * (first tick not airborne) SWAPPING -> ACTIVE, or REJECTED if the self test fails. A new
+ * BEGIN while PENDING drops the pending upload. The flying model is never touched by a
+ * rejected upload: the model slot is written only in SWAPPING, on the ground, after every
+ * check passed (only a blob that passes every check but fails the self test while an earlier
+ * upload is active leaves the compiled-in blob flying, never an unchecked one). */
+#define HF_UP_INFO_BYTES 0x40u
+#define HF_UP_CONTROL_ADDR 0x40u
+#define HF_UP_DATA_ADDR 0x1000u
+#define HF_UP_MAGIC 0x50554648u /* "HFUP" */
+#define HF_UP_LAYOUT_VERSION 1u
+#define HF_UP_CMD_BEGIN 1u
+#define HF_UP_CMD_COMMIT 2u
+enum {
+  HF_UP_IDLE = 0,
+  HF_UP_RECEIVING = 1,
+  HF_UP_PENDING = 2,
+  HF_UP_SWAPPING = 3,
+  HF_UP_ACTIVE = 4,
+  HF_UP_REJECTED = 5
+};
+/* What the worker is asked to do. */
+enum { HF_JOB_STEP = 0, HF_JOB_LOAD = 1, HF_JOB_REVERT = 2 };
+
+static uint8_t upState = HF_UP_IDLE; /* HF_UP_*, changed with __atomic (memory task, stabilizer) */
+static uint8_t upError;
+static uint8_t revertRequest; /* parameter: write 1 to fly the compiled-in blob again */
+static volatile uint8_t job = HF_JOB_STEP;
+/* The active blob (logs blobSrc, blobCrc). */
+static uint8_t activeSource; /* 0 compiled-in, 1 uploaded */
+static uint32_t activeCrc;
+static float activeMassKg;
+static uint16_t activeVersion;
+
+static bool upSwap(uint8_t from, uint8_t to) {
+  return __atomic_compare_exchange_n(&upState, &from, to, false, __ATOMIC_SEQ_CST,
+                                     __ATOMIC_SEQ_CST);
+}
+
+#if HAMFLIGHT_UPLOAD
+/* RAM: the staging slot (HF_BLOB_MAX_BYTES) and the decoded model (HF_MODEL_STORAGE_BYTES). */
+static uint8_t staging[HF_BLOB_MAX_BYTES];
+static hf_model_t uploadedModel;
+static uint32_t upLen;       /* announced by BEGIN */
+static uint32_t upStagedCrc; /* of the last upload that passed the commit check */
+static bool memRegistered;    /* the MEM_TYPE_APP handler is registered */
+static uint8_t upLoad(void) { return __atomic_load_n(&upState, __ATOMIC_SEQ_CST); }
+static void upStore(uint8_t v) { __atomic_store_n(&upState, v, __ATOMIC_SEQ_CST); }
+
+static void putU32(uint8_t *b, uint32_t v) {
+  b[0] = (uint8_t)v;
+  b[1] = (uint8_t)(v >> 8);
+  b[2] = (uint8_t)(v >> 16);
+  b[3] = (uint8_t)(v >> 24);
+}
+
+static uint32_t upMemSize(const uint8_t internalId) {
+  (void)internalId;
+  return HF_UP_DATA_ADDR + HF_BLOB_MAX_BYTES;
+}
+
+static void upInfo(uint8_t info[HF_UP_INFO_BYTES]) {
+  memset(info, 0, HF_UP_INFO_BYTES);
+  putU32(&info[0x00], HF_UP_MAGIC);
+  info[0x04] = (uint8_t)HF_UP_LAYOUT_VERSION;
+  info[0x06] = activeSource;
+  info[0x07] = upLoad();
+  putU32(&info[0x08], activeCrc);
+  uint32_t massBits;
+  memcpy(&massBits, &activeMassKg, sizeof(massBits));
+  putU32(&info[0x0C], massBits);
+  info[0x10] = (uint8_t)activeVersion;
+  info[0x11] = (uint8_t)(activeVersion >> 8);
+  info[0x12] = upError;
+  putU32(&info[0x14], HF_BLOB_MAX_BYTES);
+  putU32(&info[0x18], upLen);
+  putU32(&info[0x1C], upStagedCrc);
+  const char *name = activeSource ? "uploaded" : hf_model_name();
+  for (uint32_t i = 0; i < 31u && name[i] != '\0'; i++) {
+    info[0x20 + i] = (uint8_t)name[i];
+  }
+}
+
+/* The memory task reads: the info block or the staging slot, each whole within its region. */
+static bool upMemRead(const uint8_t internalId, const uint32_t memAddr, const uint8_t readLen,
+                      uint8_t *buffer) {
+  (void)internalId;
+  if (memAddr <= HF_UP_INFO_BYTES && readLen <= HF_UP_INFO_BYTES - memAddr) {
+    uint8_t info[HF_UP_INFO_BYTES];
+    upInfo(info);
+    memcpy(buffer, &info[memAddr], readLen);
+    return true;
+  }
+  if (memAddr >= HF_UP_DATA_ADDR && memAddr - HF_UP_DATA_ADDR <= HF_BLOB_MAX_BYTES &&
+      readLen <= HF_BLOB_MAX_BYTES - (memAddr - HF_UP_DATA_ADDR)) {
+    memcpy(buffer, &staging[memAddr - HF_UP_DATA_ADDR], readLen);
+    return true;
+  }
+  return false;
+}
+
+/* BEGIN: from any state but SWAPPING. */
+static bool upBegin(uint32_t len) {
+  if (len == 0u || len > HF_BLOB_MAX_BYTES) {
+    return false;
+  }
+  uint8_t s = upLoad();
+  do {
+    if (s == HF_UP_SWAPPING) {
+      return false;
+    }
+  } while (!__atomic_compare_exchange_n(&upState, &s, (uint8_t)HF_UP_RECEIVING, false,
+                                        __ATOMIC_SEQ_CST, __ATOMIC_SEQ_CST));
+  memset(staging, 0, sizeof(staging));
+  upLen = len;
+  upError = 0;
+  upStagedCrc = 0;
+  return true;
+}
+
+/* COMMIT: the memory task checks the staged bytes (low priority: the flight never waits). */
+static bool upCommit(void) {
+  if (upLoad() != HF_UP_RECEIVING) {
+    return false;
+  }
+  hf_blob_info_t info;
+  const uint32_t err = hf_blob_check(staging, upLen, &info);
+  if (err == HF_OK) {
+    upStagedCrc = info.crc;
+    upStore(HF_UP_PENDING);
+    DEBUG_PRINT("upload of %u B checked, crc %08X: flies once not airborne\n",
+                (unsigned int)upLen, (unsigned int)info.crc);
+  } else {
+    upError = (uint8_t)err;
+    upStore(HF_UP_REJECTED);
+    DEBUG_PRINT("upload of %u B rejected: error %u\n", (unsigned int)upLen, (unsigned int)err);
+  }
+  return true;
+}
+
+static bool upMemWrite(const uint8_t internalId, const uint32_t memAddr, const uint8_t writeLen,
+                       const uint8_t *buffer) {
+  (void)internalId;
+  if (memAddr == HF_UP_CONTROL_ADDR && writeLen >= 1u) {
+    if (buffer[0] == HF_UP_CMD_BEGIN && writeLen == 5u) {
+      const uint32_t len = (uint32_t)buffer[1] | ((uint32_t)buffer[2] << 8) |
+                           ((uint32_t)buffer[3] << 16) | ((uint32_t)buffer[4] << 24);
+      return upBegin(len);
+    }
+    if (buffer[0] == HF_UP_CMD_COMMIT && writeLen == 1u) {
+      return upCommit();
+    }
+    return false;
+  }
+  if (memAddr >= HF_UP_DATA_ADDR && upLoad() == HF_UP_RECEIVING &&
+      memAddr - HF_UP_DATA_ADDR <= upLen && writeLen <= upLen - (memAddr - HF_UP_DATA_ADDR)) {
+    memcpy(&staging[memAddr - HF_UP_DATA_ADDR], buffer, writeLen);
+    return true;
+  }
+  return false;
+}
+
+static const MemoryHandlerDef_t upMemDef = {
+    .type = MEM_TYPE_APP,
+    .getSize = upMemSize,
+    .read = upMemRead,
+    .write = upMemWrite,
+};
+#endif /* HAMFLIGHT_UPLOAD */
+
+static void setActiveBuiltin(void) {
+  activeSource = 0;
+  activeCrc = hf_model_crc();
+  activeMassKg = hf_mass_kg();
+  activeVersion = 0; /* compiled in: decoded at build time */
+}
+
+static void printActive(void) {
+  const int massG = (int)(activeMassKg * 1000.0f + 0.5f);
+  if (activeSource) {
+    DEBUG_PRINT("active blob: uploaded crc %08X, %d g\n", (unsigned int)activeCrc, massG);
+  } else {
+    DEBUG_PRINT("active blob: compiled-in %s crc %08X, %d g\n", hf_model_name(),
+                (unsigned int)activeCrc, massG);
+  }
+}
+
+/* The worker's swap (HF_JOB_LOAD, HF_JOB_REVERT), with the controller to itself: the
+ * stabilizer started it while not airborne and outputs zero until it is done. */
+static void serveSwap(void) {
+  (void)hf_use_model(&ctl, NULL); /* nothing flies the slot while it is loaded */
+  setActiveBuiltin();
+#if HAMFLIGHT_UPLOAD
+  if (job == HF_JOB_LOAD) {
+    hf_blob_info_t info;
+    const uint32_t err = hf_model_load(&uploadedModel, staging, upLen, &info);
+    if (err == HF_OK && hf_use_model(&ctl, &uploadedModel) == HF_OK) {
+      activeSource = 1;
+      activeCrc = info.crc;
+      activeMassKg = info.mass_kg;
+      activeVersion = info.version;
+      upStore(HF_UP_ACTIVE);
+    } else {
+      upError = (uint8_t)err;
+      upStore(HF_UP_REJECTED);
+      DEBUG_PRINT("upload rejected at load: error %u\n", (unsigned int)err);
+    }
+  }
+#endif
+  hf_get_gains(&ctl, &gains); /* the parameters follow the new model's gains */
+  hf_set_adapt(&ctl, false);
+  printActive();
+}
+
 /* One step of the core on the inputs in hfState/hfSetpoint: the only deep call. */
 static void serveStep(void) {
   const uint32_t start = DWT->CYCCNT;
@@ -170,6 +426,7 @@ static bool workerIdle(void) { return workerReady && doneSeq == requestSeq; }
  * time. */
 static bool runStep(void) {
   (void)xSemaphoreTake(done, 0); /* drop a late completion of an earlier request */
+  job = HF_JOB_STEP;
   requestSeq = requestSeq + 1u;
   xSemaphoreGive(request);
   return xSemaphoreTake(done, HF_WORKER_TIMEOUT_TICKS) == pdTRUE && doneSeq == requestSeq;
@@ -201,6 +458,30 @@ static void disengage(void) {
   hf_reset(&ctl);
   hf_set_adapt(&ctl, false);
   phase = HF_PHASE_OFF;
+}
+
+/* Hands the worker a pending swap (an upload that passed its check, or a revert) if the
+ * vehicle is not airborne and the worker idle; true if it did (the caller outputs zero). */
+static bool startSwapIfDue(void) {
+  if (!isInit || phase == HF_PHASE_AIRBORNE || !workerIdle()) {
+    return false;
+  }
+  uint8_t next;
+  if (revertRequest) {
+    revertRequest = 0;
+    (void)upSwap(HF_UP_PENDING, HF_UP_IDLE); /* a revert also drops a pending upload */
+    next = HF_JOB_REVERT;
+  } else if (upSwap(HF_UP_PENDING, HF_UP_SWAPPING)) {
+    next = HF_JOB_LOAD;
+  } else {
+    return false;
+  }
+  disengage(); /* the next engagement starts over with the new model */
+  (void)xSemaphoreTake(done, 0);
+  job = next;
+  requestSeq = requestSeq + 1u;
+  xSemaphoreGive(request);
+  return true;
 }
 
 static float wrapPi(float a) {
@@ -369,6 +650,19 @@ void controllerOutOfTreeInit(void) {
     hf_get_gains(&ctl, &gains);
     hf_get_composite(&ctl, &composite);
     enableCycleCounter();
+    setActiveBuiltin();
+    /* Memory handlers may only be registered before crtpMemInit() (its task blocks further
+     * registrations, and a late one fails an ASSERT). With CONFIG_CONTROLLER_OOT the
+     * stabilizer auto-selects this controller in stabilizerInit(), which the system task runs
+     * after memInit() and before crtpMemInit() (crazyflie-firmware 2a18fc29, system.c): register
+     * there. A first init from any other task (the controller selected later by parameter)
+     * cannot register: the upload is then unavailable and the console says so. */
+#if HAMFLIGHT_UPLOAD
+    if (strcmp(pcTaskGetName(NULL), "SYSTEM") == 0) { /* SYSTEM_TASK_NAME, config.h */
+      memoryRegisterHandler(&upMemDef);
+      memRegistered = true;
+    }
+#endif
     isInit = true;
   }
   /* A late step still running in the worker owns the controller: then only mark the phase; the
@@ -382,6 +676,14 @@ void controllerOutOfTreeInit(void) {
   updateLogs();
   DEBUG_PRINT("model %s crc %08X, %d g, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),
               (int)(hf_mass_kg() * 1000.0f + 0.5f), (int)HAMFLIGHT_RATE_HZ);
+  printActive();
+#if HAMFLIGHT_UPLOAD
+  if (!memRegistered) {
+    DEBUG_PRINT("weights upload unavailable: first selected after boot\n");
+  }
+#else
+  DEBUG_PRINT("weights upload compiled out (HAMFLIGHT_UPLOAD=0)\n");
+#endif
 }
 
 /* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
@@ -393,10 +695,18 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   /* A step still running in the worker (after a timeout) owns the controller: stay off. */
   if (!workerIdle()) {
     zeroOutput(control);
-    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
+    hfOut.faults = (job == HF_JOB_STEP) ? HF_SHIM_WORKER_TIMEOUT : HF_SHIM_SWAPPING;
     logFaults = hfOut.faults;
     return;
   }
+  /* A new model (or the compiled-in one again) only while not airborne. */
+  if (startSwapIfDue()) {
+    zeroOutput(control);
+    hfOut.faults = HF_SHIM_SWAPPING;
+    logFaults = hfOut.faults;
+    return;
+  }
+  logFaults &= ~HF_SHIM_SWAPPING; /* a swap that ended: its flag goes */
   /* Off is checked at every 1 kHz tick, so a stop acts within 1 ms whatever the rate. */
   if (!isInit || !supervisorCanFly() ||
       (setpoint->mode.z == modeDisable && !(setpoint->thrust >= HF_STOP_THRUST))) {
@@ -446,7 +756,11 @@ void appMain(void) {
   for (;;) {
     if (xSemaphoreTake(request, portMAX_DELAY) == pdTRUE) {
       const uint32_t seq = requestSeq;
-      serveStep();
+      if (job == HF_JOB_STEP) {
+        serveStep();
+      } else {
+        serveSwap();
+      }
       doneSeq = seq;
       xSemaphoreGive(done);
     }
@@ -473,6 +787,7 @@ PARAM_ADD(PARAM_FLOAT, qF, &composite.q_force)
 PARAM_ADD(PARAM_FLOAT, qT, &composite.q_torque)
 PARAM_ADD(PARAM_FLOAT, rF, &composite.r_force)
 PARAM_ADD(PARAM_FLOAT, rT, &composite.r_torque)
+PARAM_ADD(PARAM_UINT8, revert, &revertRequest)
 PARAM_GROUP_STOP(hamflight)
 
 LOG_GROUP_START(hamflight)
@@ -498,4 +813,8 @@ LOG_ADD(LOG_FLOAT, e3, &logEps[3])
 LOG_ADD(LOG_FLOAT, e4, &logEps[4])
 LOG_ADD(LOG_FLOAT, e5, &logEps[5])
 LOG_ADD(LOG_FLOAT, pTrace, &logPTrace)
+LOG_ADD(LOG_UINT8, blobSrc, &activeSource)
+LOG_ADD(LOG_UINT32, blobCrc, &activeCrc)
+LOG_ADD(LOG_UINT8, upState, &upState)
+LOG_ADD(LOG_UINT8, upError, &upError)
 LOG_GROUP_STOP(hamflight)

@@ -23,6 +23,11 @@ enum Command {
     /// Learn the Hamiltonian model and disturbance features (paper Problem 1) from a dataset;
     /// writes FILE.hfw (the weight blob) and FILE.hfw.json (training report).
     Train(host_train::train::TrainArgs),
+    /// Score a blob's open-loop multi-step predictions on any dataset (flights it did not
+    /// train on): MAE and RMSE of position, velocity, attitude and body rates per horizon, for
+    /// the learned model, the nominal model with the vehicle's constants, and the hold and
+    /// zero-order baselines; prints a table, writes DIR/score.json and DIR/score.svg.
+    Score(host_train::pipeline::score::ScoreArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
@@ -70,6 +75,13 @@ fn run(cli: Cli) -> Result<()> {
                 "{}",
                 host_train::fly::margins::table(&args.scenario.display().to_string(), &rows)
             );
+        }
+        Command::Score(args) => {
+            let s = host_train::pipeline::score::run(&args)?;
+            print!("{}", host_train::pipeline::score::table(&s));
+            if let Some(dir) = &args.out {
+                println!("wrote {}/score.json and score.svg", dir.display());
+            }
         }
         Command::Collect(args) => {
             let t0 = std::time::Instant::now();

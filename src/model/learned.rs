@@ -84,6 +84,11 @@ impl LearnedModel {
         }
     }
 
+    /// [`LearnedModel::with_motor_tau_s`] in place.
+    pub(crate) fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
+        self.motor_tau_bits = motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits();
+    }
+
     /// Decodes and checks a weight blob ([`blob::decode_model_into`]): the networks, the mass
     /// and the motor lag (the default for blobs before format version 3).
     ///
@@ -384,8 +389,14 @@ impl ModelWeights {
     /// the CF2X's, g the true input gain and W the nominal features (a world force along e_k, a
     /// body torque along e_k). Training starts near this point.
     pub fn prior() -> Self {
+        Self::prior_with_inertia(&Vector3::new(1.4e-5, 1.4e-5, 2.17e-5))
+    }
+
+    /// [`ModelWeights::prior`] with J = diag(`inertia_kg_m2`) instead of the CF2X's: the prior
+    /// of a described vehicle.
+    pub fn prior_with_inertia(inertia_kg_m2: &Vector3<f32>) -> Self {
         let mut w = Self::default();
-        w.inertia.l2.bias = l_for_diagonal_inertia(&Vector3::new(1.4e-5, 1.4e-5, 2.17e-5));
+        w.inertia.l2.bias = l_for_diagonal_inertia(inertia_kg_m2);
         w.gain.l2.bias = true_gain_output();
         w.disturbance.l2.bias = nominal_feature_bias();
         w

@@ -17,6 +17,7 @@
 #include "app.h"
 #include "controller.h"
 #include "hf_host_registry.h"
+#include "mem.h"
 #include "semphr.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
@@ -31,9 +32,43 @@ static bool isFlying;
 bool supervisorCanFly(void) { return canFly; }
 bool supervisorIsFlying(void) { return isFlying; }
 
+char *pcTaskGetName(void *task) {
+  (void)task;
+  static char name[] = "SYSTEM";
+  return name;
+}
+
 void vTaskDelay(const TickType_t ticks) {
   const struct timespec ts = {(time_t)(ticks / 1000u), (long)(ticks % 1000u) * 1000000L};
   nanosleep(&ts, NULL);
+}
+
+/* ---- the memory subsystem: the one handler the shim registers, driven as crtp_mem.c's
+ * memory task drives it (memId, address, length, buffer) ---- */
+
+static const MemoryHandlerDef_t *memHandler;
+static int memRegistrations;
+
+void memoryRegisterHandler(const MemoryHandlerDef_t *handlerDef) {
+  memHandler = handlerDef;
+  memRegistrations++;
+}
+
+/* The registered handler's type (-1: none) and how often a handler was registered. */
+int hf_host_mem_type(void) { return memHandler ? (int)memHandler->type : -1; }
+int hf_host_mem_registrations(void) { return memRegistrations; }
+uint32_t hf_host_mem_size(void) {
+  return memHandler ? memHandler->getSize(memHandler->internal_id) : 0u;
+}
+
+/* A read or write packet of the memory protocol: false is the EIO status the client gets. */
+bool hf_host_mem_read(uint32_t addr, uint8_t len, uint8_t *buffer) {
+  return memHandler && memHandler->read &&
+         memHandler->read(memHandler->internal_id, addr, len, buffer);
+}
+bool hf_host_mem_write(uint32_t addr, uint8_t len, const uint8_t *buffer) {
+  return memHandler && memHandler->write &&
+         memHandler->write(memHandler->internal_id, addr, len, buffer);
 }
 
 /* ---- FreeRTOS binary semaphores on pthreads, and the worker task ---- */

@@ -8,7 +8,7 @@
 
 #include "hamflight.h"
 
-const uint32_t hf_c_layout[61] = {
+const uint32_t hf_c_layout[75] = {
     sizeof(hf_controller_t),
     _Alignof(hf_controller_t),
     sizeof(hf_state_t),
@@ -69,5 +69,19 @@ const uint32_t hf_c_layout[61] = {
     offsetof(hf_composite_t, r_torque),
     HF_LAW_GRADIENT,
     HF_LAW_COMPOSITE,
+    sizeof(hf_model_t),
+    _Alignof(hf_model_t),
+    HF_MODEL_STORAGE_BYTES,
+    HF_BLOB_MAX_BYTES,
+    sizeof(hf_blob_info_t),
+    offsetof(hf_blob_info_t, crc),
+    offsetof(hf_blob_info_t, total_len_bytes),
+    offsetof(hf_blob_info_t, mass_kg),
+    offsetof(hf_blob_info_t, version),
+    offsetof(hf_blob_info_t, reserved),
+    HF_ERR_BLOB_TRUNCATED,
+    HF_ERR_BLOB_CRC,
+    HF_ERR_BLOB_MOTOR_TAU,
+    HF_ERR_SELF_TEST,
     0xC0DE,
 };

@@ -5,5 +5,7 @@
 #include "FreeRTOS.h"
 
 void vTaskDelay(const TickType_t ticks);
+/* The calling task's name (FreeRTOS): "SYSTEM" on the host, as in the firmware's boot init. */
+char *pcTaskGetName(void *task);
 
 #endif

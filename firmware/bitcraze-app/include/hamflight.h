@@ -57,6 +57,25 @@ extern "C" {
 #define HF_ERR_BAD_GAINS 1u  /* a gain was NaN, infinite, negative, or max_tilt_rad not in (0, pi/2) */
 #define HF_ERR_NULL 2u       /* NULL pointer, or the controller was never hf_init'ed */
 
+/* Why a weight blob was refused (hf_blob_check, hf_model_load): one code per check of the
+ * core's blob decoder (src/blob.rs), in file order, then the self test. */
+#define HF_ERR_BLOB_TRUNCATED 16u   /* shorter than its header says */
+#define HF_ERR_BLOB_BAD_MAGIC 17u   /* not "HMFW" */
+#define HF_ERR_BLOB_VERSION 18u     /* a format version this build cannot read */
+#define HF_ERR_BLOB_SHAPE 19u       /* network shapes differ from this build's */
+#define HF_ERR_BLOB_CRC 20u         /* the body's CRC-32 does not match */
+#define HF_ERR_BLOB_TRAILING 21u    /* bytes after the CRC */
+#define HF_ERR_BLOB_MALFORMED 22u   /* the body is not the expected parameters */
+#define HF_ERR_BLOB_NON_FINITE 23u  /* a NaN or infinite parameter */
+#define HF_ERR_BLOB_MASS 24u        /* mass outside 0.005..5 kg */
+#define HF_ERR_BLOB_MOTOR_TAU 25u   /* motor time constant outside 0..1 s */
+#define HF_ERR_SELF_TEST 26u        /* decoded, but its hover step fails the self test */
+
+/* The largest weight blob this build reads (a current-version one), bytes. */
+#define HF_BLOB_MAX_BYTES 9712u
+/* Bytes of storage a model received at run time needs (its decoded networks). */
+#define HF_MODEL_STORAGE_BYTES 9696
+
 /* Adaptation laws (hf_set_law). */
 #define HF_LAW_GRADIENT 0u   /* the paper's gradient law on the tracking errors */
 #define HF_LAW_COMPOSITE 1u  /* the composite law: also the model's prediction error, Kalman gain */
@@ -121,6 +140,21 @@ typedef struct hf_composite {
   float r_torque;  /* measurement variance R of the torque rows, per sample (> 0) */
 } hf_composite_t;
 
+/* Storage for a model received at run time (hf_model_load). Zeroed (static storage is): empty.
+ * It must outlive every controller that flies it (a static of the shim). */
+typedef struct hf_model {
+  _Alignas(8) uint8_t opaque[HF_MODEL_STORAGE_BYTES];
+} hf_model_t;
+
+/* What a checked weight blob says of itself. 16 bytes. */
+typedef struct hf_blob_info {
+  uint32_t crc;              /* CRC-32 of the body, as stored in the blob */
+  uint32_t total_len_bytes;  /* the whole blob: header, body, CRC */
+  float mass_kg;             /* the vehicle mass */
+  uint16_t version;          /* the blob's format version */
+  uint16_t reserved;         /* zero */
+} hf_blob_info_t;
+
 /* Initialise: the compiled-in model, default gains, adaptation on, a = 0. NULL is ignored. */
 void hf_init(hf_controller_t *ctl);
 
@@ -180,6 +214,26 @@ uint32_t hf_model_crc(void);
 
 /* The vehicle mass (kg) the model was built for. */
 float hf_mass_kg(void);
+
+/* ---- Weights received at run time (the shim's MEM_TYPE_APP upload) ----
+ * All three never allocate and never panic; NULL pointers give HF_ERR_NULL. */
+
+/* Every check of the blob decoder (format, version, shapes, length, CRC, finiteness, mass,
+ * motor lag) on len bytes, writing nothing but *info (when HF_OK; info may be NULL). Small
+ * stack: the shim runs it in the memory task. HF_OK or an HF_ERR_BLOB_* code. */
+uint32_t hf_blob_check(const uint8_t *bytes, uint32_t len, hf_blob_info_t *info);
+
+/* Decodes the blob into *model, in place, then runs the self test (hf_self_test's hover step)
+ * on it: HF_OK, an HF_ERR_BLOB_* code or HF_ERR_SELF_TEST. On any error *model is left empty
+ * (no controller may fly it). *model must not be in use by a controller. Needs the self test's
+ * stack (~2.2 KB): the shim runs it in its worker task. */
+uint32_t hf_model_load(hf_model_t *model, const uint8_t *bytes, uint32_t len, hf_blob_info_t *info);
+
+/* Flies ctl with *model (NULL: the compiled-in model): the gains become the new model's
+ * defaults for its mass (hf_get_gains gives them), the law, the composite tuning and the
+ * adaptation switch are kept, a = 0. HF_OK, or HF_ERR_NULL (ctl not initialised, or *model
+ * empty) with ctl unchanged. Only while not flying. */
+uint32_t hf_use_model(hf_controller_t *ctl, const hf_model_t *model);
 
 #ifdef __cplusplus
 }

@@ -12,6 +12,11 @@ pub const FEATURES: usize = hamflight::model::FEATURES;
 /// `HF_CONTROLLER_STORAGE_BYTES`.
 pub const CONTROLLER_STORAGE_BYTES: usize = 1024;
 
+/// `HF_MODEL_STORAGE_BYTES`: an uploaded model's storage (the decoded networks, ~9.7 KB).
+pub const MODEL_STORAGE_BYTES: usize = 9696;
+/// `HF_BLOB_MAX_BYTES`: the largest weight blob (a current-version one).
+pub const BLOB_MAX_BYTES: usize = hamflight::blob::MAX_LEN;
+
 /// `HF_FAULT_BAD_STATE`.
 pub const FAULT_BAD_STATE: u32 = 1 << 0;
 /// `HF_FAULT_BAD_SETPOINT`.
@@ -39,6 +44,83 @@ pub const OK: u32 = 0;
 pub const ERR_BAD_GAINS: u32 = 1;
 /// `HF_ERR_NULL`.
 pub const ERR_NULL: u32 = 2;
+
+/// `HF_ERR_BLOB_TRUNCATED` … `HF_ERR_SELF_TEST`: why a blob was refused (one per
+/// [`hamflight::blob::BlobError`], then the self test).
+pub const ERR_BLOB_TRUNCATED: u32 = 16;
+/// `HF_ERR_BLOB_BAD_MAGIC`.
+pub const ERR_BLOB_BAD_MAGIC: u32 = 17;
+/// `HF_ERR_BLOB_VERSION`.
+pub const ERR_BLOB_VERSION: u32 = 18;
+/// `HF_ERR_BLOB_SHAPE`.
+pub const ERR_BLOB_SHAPE: u32 = 19;
+/// `HF_ERR_BLOB_CRC`.
+pub const ERR_BLOB_CRC: u32 = 20;
+/// `HF_ERR_BLOB_TRAILING`.
+pub const ERR_BLOB_TRAILING: u32 = 21;
+/// `HF_ERR_BLOB_MALFORMED`.
+pub const ERR_BLOB_MALFORMED: u32 = 22;
+/// `HF_ERR_BLOB_NON_FINITE`.
+pub const ERR_BLOB_NON_FINITE: u32 = 23;
+/// `HF_ERR_BLOB_MASS`.
+pub const ERR_BLOB_MASS: u32 = 24;
+/// `HF_ERR_BLOB_MOTOR_TAU`.
+pub const ERR_BLOB_MOTOR_TAU: u32 = 25;
+/// `HF_ERR_SELF_TEST`: the blob decoded but its hover step failed the self test.
+pub const ERR_SELF_TEST: u32 = 26;
+
+/// The `HF_ERR_BLOB_*` code of a blob error.
+pub fn blob_error_code(e: hamflight::blob::BlobError) -> u32 {
+    use hamflight::blob::BlobError as E;
+    match e {
+        E::Truncated => ERR_BLOB_TRUNCATED,
+        E::BadMagic => ERR_BLOB_BAD_MAGIC,
+        E::UnsupportedVersion(_) => ERR_BLOB_VERSION,
+        E::ShapeMismatch => ERR_BLOB_SHAPE,
+        E::Checksum => ERR_BLOB_CRC,
+        E::TrailingBytes => ERR_BLOB_TRAILING,
+        E::Malformed => ERR_BLOB_MALFORMED,
+        E::NonFinite => ERR_BLOB_NON_FINITE,
+        E::BadMass => ERR_BLOB_MASS,
+        E::BadMotorTau => ERR_BLOB_MOTOR_TAU,
+    }
+}
+
+/// `hf_model_t`: storage the C side owns for a model received at run time (zeroed: empty).
+#[repr(C, align(8))]
+pub struct HfModel {
+    /// The bytes; their meaning is private to [`crate`].
+    pub opaque: [u8; MODEL_STORAGE_BYTES],
+}
+
+/// `hf_blob_info_t`: what a checked blob says of itself.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HfBlobInfo {
+    /// CRC-32 of the body, as stored in the blob.
+    pub crc: u32,
+    /// The whole blob's length (bytes).
+    pub total_len_bytes: u32,
+    /// The vehicle mass (kg).
+    pub mass_kg: f32,
+    /// The blob's format version.
+    pub version: u16,
+    /// Zero.
+    pub reserved: u16,
+}
+
+impl HfBlobInfo {
+    /// From the core's check.
+    pub fn from_core(i: &hamflight::blob::BlobInfo) -> Self {
+        Self {
+            crc: i.crc,
+            total_len_bytes: u32::try_from(i.total_len).unwrap_or(u32::MAX),
+            mass_kg: i.mass_kg,
+            version: i.version,
+            reserved: 0,
+        }
+    }
+}
 
 /// `HF_LAW_GRADIENT`: the paper's gradient adaptation law.
 pub const LAW_GRADIENT: u32 = 0;
@@ -325,7 +407,7 @@ mod tests {
         static hf_c_layout: [u32; LAYOUT_LEN];
     }
 
-    const LAYOUT_LEN: usize = 61;
+    const LAYOUT_LEN: usize = 75;
 
     /// The same list, in the same order, as Rust sees it.
     fn rust_layout() -> [u32; LAYOUT_LEN] {
@@ -390,6 +472,20 @@ mod tests {
             offset_of!(HfComposite, r_torque),
             LAW_GRADIENT as usize,
             LAW_COMPOSITE as usize,
+            size_of::<HfModel>(),
+            align_of::<HfModel>(),
+            MODEL_STORAGE_BYTES,
+            BLOB_MAX_BYTES,
+            size_of::<HfBlobInfo>(),
+            offset_of!(HfBlobInfo, crc),
+            offset_of!(HfBlobInfo, total_len_bytes),
+            offset_of!(HfBlobInfo, mass_kg),
+            offset_of!(HfBlobInfo, version),
+            offset_of!(HfBlobInfo, reserved),
+            ERR_BLOB_TRUNCATED as usize,
+            ERR_BLOB_CRC as usize,
+            ERR_BLOB_MOTOR_TAU as usize,
+            ERR_SELF_TEST as usize,
             0xC0DE,
         ];
         v.map(|x| x as u32)

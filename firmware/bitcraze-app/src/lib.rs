@@ -24,7 +24,7 @@ extern crate std;
 
 pub mod abi;
 
-use abi::{HfComposite, HfController, HfGains, HfOutput, HfSetpoint, HfState};
+use abi::{HfBlobInfo, HfComposite, HfController, HfGains, HfModel, HfOutput, HfSetpoint, HfState};
 use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
 use hamflight::{FlightController, Gains, Setpoint, State, VehicleFacts};
 
@@ -46,7 +46,22 @@ struct Inner {
     ctl: FlightController<&'static LearnedModel>,
 }
 
+/// Marks a loaded, self-tested [`ModelInner`] ("HFMD").
+const MODEL_MAGIC: u32 = 0x4846_4D44;
+
+/// What lives in a [`HfModel`]'s storage.
+#[repr(C)]
+struct ModelInner {
+    /// [`MODEL_MAGIC`] once loaded and self-tested; zeroed storage reads 0.
+    magic: u32,
+    /// Every bit pattern of these f32/u32 fields is a valid model (zero bytes are
+    /// `LearnedModel::new(ModelWeights::ZERO)`), so it is decoded in place.
+    model: LearnedModel,
+}
+
 const _: () = {
+    assert!(core::mem::size_of::<ModelInner>() <= abi::MODEL_STORAGE_BYTES);
+    assert!(core::mem::align_of::<ModelInner>() <= core::mem::align_of::<HfModel>());
     assert!(core::mem::size_of::<Inner>() <= abi::CONTROLLER_STORAGE_BYTES);
     assert!(core::mem::align_of::<Inner>() <= core::mem::align_of::<HfController>());
 };
@@ -352,14 +367,123 @@ pub unsafe extern "C" fn hf_last_faults(ctl: *const HfController) -> u32 {
 /// `hf_self_test`: one hover step on a scratch controller gives no fault and m g ± 20 %.
 #[no_mangle]
 pub extern "C" fn hf_self_test() -> bool {
-    let mass_kg = model::MODEL.mass_kg();
-    let mut ctl = FlightController::new(
-        &model::MODEL,
-        Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
-    );
+    self_test(&model::MODEL)
+}
+
+/// One hover step of `model` on a scratch controller: no fault, thrust m g ± 20 %.
+fn self_test(model: &LearnedModel) -> bool {
+    let weight_n = model.mass_kg() * GRAVITY_M_S2;
+    let mut ctl = FlightController::new(model, Gains::for_vehicle(&VehicleFacts::of(model)));
     let o = ctl.step(&State::default(), &Setpoint::default(), 0.002);
-    let weight_n = mass_kg * GRAVITY_M_S2;
     !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n
+}
+
+/// `bytes[..len]`, if `bytes` is non-null.
+///
+/// # Safety
+/// `bytes` is null or valid for reading `len` bytes.
+unsafe fn byte_slice<'a>(bytes: *const u8, len: u32) -> Option<&'a [u8]> {
+    let len = usize::try_from(len).ok()?;
+    // SAFETY: non-null and valid for len bytes by the contract.
+    (!bytes.is_null()).then(|| unsafe { core::slice::from_raw_parts(bytes, len) })
+}
+
+/// `hf_blob_check`: every check of the blob decoder, nothing decoded; `*info` on success.
+///
+/// # Safety
+/// `bytes` null or valid for `len` bytes; `info` null or writable.
+#[no_mangle]
+pub unsafe extern "C" fn hf_blob_check(bytes: *const u8, len: u32, info: *mut HfBlobInfo) -> u32 {
+    // SAFETY: the caller's contract.
+    let Some(bytes) = (unsafe { byte_slice(bytes, len) }) else {
+        return abi::ERR_NULL;
+    };
+    match hamflight::blob::check(bytes) {
+        Ok(i) => {
+            // SAFETY: the caller's contract.
+            if let Some(out) = unsafe { info.as_mut() } {
+                *out = HfBlobInfo::from_core(&i);
+            }
+            abi::OK
+        }
+        Err(e) => abi::blob_error_code(e),
+    }
+}
+
+/// `hf_model_load`: decode in place into `*model` and self-test it; empty on any error.
+///
+/// # Safety
+/// `model` null or valid writable `hf_model_t` storage that no controller flies; `bytes` null
+/// or valid for `len` bytes; `info` null or writable.
+#[no_mangle]
+pub unsafe extern "C" fn hf_model_load(
+    model: *mut HfModel,
+    bytes: *const u8,
+    len: u32,
+    info: *mut HfBlobInfo,
+) -> u32 {
+    // SAFETY: the caller's contract.
+    let Some(bytes) = (unsafe { byte_slice(bytes, len) }) else {
+        return abi::ERR_NULL;
+    };
+    if model.is_null() {
+        return abi::ERR_NULL;
+    }
+    let inner = model.cast::<ModelInner>();
+    // SAFETY: non-null, aligned and large enough (asserted above), exclusive by the contract.
+    // Every field is an f32 or a u32, so any bytes (zeroed or stale) are a valid ModelInner.
+    let inner = unsafe { &mut *inner };
+    inner.magic = 0;
+    let checked = match hamflight::blob::check(bytes) {
+        Ok(i) => i,
+        Err(e) => return abi::blob_error_code(e),
+    };
+    if let Err(e) = hamflight::blob::decode_model_into(bytes, &mut inner.model) {
+        return abi::blob_error_code(e);
+    }
+    if !self_test(&inner.model) {
+        return abi::ERR_SELF_TEST;
+    }
+    inner.magic = MODEL_MAGIC;
+    // SAFETY: the caller's contract.
+    if let Some(out) = unsafe { info.as_mut() } {
+        *out = HfBlobInfo::from_core(&checked);
+    }
+    abi::OK
+}
+
+/// `hf_use_model`: fly `ctl` with `*model` (null: the compiled-in one), gains for its mass.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`]; `model` null or a `hf_model_t` that lives as long as `ctl` flies it
+/// and is not loaded into meanwhile (the shim's static, reloaded only after switching away).
+#[no_mangle]
+pub unsafe extern "C" fn hf_use_model(ctl: *mut HfController, model: *const HfModel) -> u32 {
+    // SAFETY: the caller's contract.
+    let Some(inner) = (unsafe { inner_mut(ctl) }) else {
+        return abi::ERR_NULL;
+    };
+    let m: &'static LearnedModel = if model.is_null() {
+        &model::MODEL
+    } else {
+        let mi = model.cast::<ModelInner>();
+        // SAFETY: non-null, aligned, valid for any bytes (see hf_model_load); 'static and not
+        // written while flown, by the contract.
+        let mi: &'static ModelInner = unsafe { &*mi };
+        if mi.magic != MODEL_MAGIC {
+            return abi::ERR_NULL;
+        }
+        &mi.model
+    };
+    let cur = inner.ctl.gains;
+    let gains = Gains {
+        law: cur.law,
+        composite: cur.composite,
+        adapt: cur.adapt,
+        ..Gains::for_vehicle(&VehicleFacts::of(m))
+    };
+    inner.ctl = FlightController::new(m, gains);
+    abi::OK
 }
 
 /// `hf_model_name`: the blob's file name, NUL-terminated, static.

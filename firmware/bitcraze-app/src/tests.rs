@@ -287,3 +287,160 @@ fn law_selection_composite_tuning_and_diagnostics() {
         assert_eq!(hf_get_law(&c), LAW_COMPOSITE);
     }
 }
+
+fn model_storage() -> std::boxed::Box<HfModel> {
+    std::boxed::Box::new(HfModel {
+        opaque: [0; MODEL_STORAGE_BYTES],
+    })
+}
+
+/// The shipped blob with its body edited by `edit` and the CRC made right again.
+fn edited_blob(edit: impl FnOnce(&mut [u8])) -> std::vec::Vec<u8> {
+    use hamflight::blob::{crc32, CRC_LEN, HEADER_LEN};
+    let mut bytes = std::fs::read(env!("HAMFLIGHT_BLOB_PATH")).unwrap();
+    let end = bytes.len() - CRC_LEN;
+    edit(&mut bytes[HEADER_LEN..end]);
+    let crc = crc32(&bytes[HEADER_LEN..end]);
+    bytes[end..].copy_from_slice(&crc.to_le_bytes());
+    bytes
+}
+
+/// The shipped blob with the mass 0.031 kg (the body's first f32): valid, not the compiled-in
+/// one.
+fn other_blob() -> (LearnedModel, std::vec::Vec<u8>) {
+    let blob = edited_blob(|body| body[..4].copy_from_slice(&0.031f32.to_le_bytes()));
+    let m = LearnedModel::from_blob(&blob).unwrap();
+    assert_eq!(m.weights.mass_kg, 0.031);
+    (m, blob)
+}
+
+#[test]
+fn blob_check_reports_the_blob_and_each_refusal() {
+    let (m, blob) = other_blob();
+    let mut info = HfBlobInfo::default();
+    // SAFETY: valid pointers and lengths throughout; null ones are reported.
+    unsafe {
+        assert_eq!(
+            hf_blob_check(blob.as_ptr(), blob.len() as u32, &mut info),
+            OK
+        );
+        assert_eq!(info.mass_kg, m.weights.mass_kg);
+        assert_eq!(info.total_len_bytes as usize, blob.len());
+        assert_eq!(info.version, hamflight::blob::FORMAT_VERSION);
+        let crc = u32::from_le_bytes(blob[blob.len() - 4..].try_into().unwrap());
+        assert_eq!(info.crc, crc);
+        assert_eq!(hf_blob_check(ptr::null(), 10, &mut info), ERR_NULL);
+        assert_eq!(
+            hf_blob_check(blob.as_ptr(), 3, ptr::null_mut()),
+            ERR_BLOB_TRUNCATED
+        );
+        let mut bad = blob.clone();
+        bad[40] ^= 4;
+        assert_eq!(
+            hf_blob_check(bad.as_ptr(), bad.len() as u32, ptr::null_mut()),
+            ERR_BLOB_CRC
+        );
+        bad[0] = b'X';
+        assert_eq!(
+            hf_blob_check(bad.as_ptr(), bad.len() as u32, ptr::null_mut()),
+            ERR_BLOB_BAD_MAGIC
+        );
+    }
+}
+
+#[test]
+fn a_loaded_model_flies_bit_for_bit_as_the_native_controller_and_can_be_left() {
+    let (m, blob) = other_blob();
+    let mut slot = model_storage();
+    let mut c = init();
+    let mut info = HfBlobInfo::default();
+    // SAFETY: valid pointers; the slot outlives the controller's use of it (dropped last).
+    unsafe {
+        assert_eq!(
+            hf_use_model(&mut c, &*slot),
+            ERR_NULL,
+            "an empty slot is refused"
+        );
+        assert_eq!(
+            hf_model_load(&mut *slot, blob.as_ptr(), blob.len() as u32, &mut info),
+            OK
+        );
+        assert_eq!(hf_set_law(&mut c, LAW_COMPOSITE), OK);
+        assert_eq!(hf_use_model(&mut c, &*slot), OK);
+        assert_eq!(hf_get_law(&c), LAW_COMPOSITE, "the law is kept");
+        let mut g = HfGains::default();
+        hf_get_gains(&c, &mut g);
+        let gains = Gains {
+            law: hamflight::AdaptationLaw::Composite,
+            ..Gains::for_vehicle(&VehicleFacts::of(&m))
+        };
+        assert_eq!(g, HfGains::from_core(&gains), "the new mass's gains");
+        let mut native = FlightController::new(&m, gains);
+        let (s, sp) = (displaced(), hover_sp());
+        for _ in 0..20 {
+            let out = step(&mut c, &s, &sp, 0.002);
+            let o = native.step_measured(
+                &s.to_core(),
+                &sp.to_core(),
+                &hamflight::adapt::Measurement::default(),
+                0.002,
+            );
+            assert_eq!(out.thrust_n, o.command.thrust_n);
+            assert_eq!(out.torque_nm, <[f32; 3]>::from(o.command.torque_nm));
+        }
+        // Back to the compiled-in model: its hover thrust again.
+        assert_eq!(hf_use_model(&mut c, ptr::null()), OK);
+        let out = step(
+            &mut c,
+            &HfState::from_core(&State::default()),
+            &HfSetpoint::default(),
+            0.002,
+        );
+        let mut builtin = FlightController::new(
+            &model::MODEL,
+            Gains {
+                law: hamflight::AdaptationLaw::Composite,
+                ..Gains::for_vehicle(&VehicleFacts::of(&model::MODEL))
+            },
+        );
+        let o = builtin.step(&State::default(), &Setpoint::default(), 0.002);
+        assert_eq!(out.thrust_n, o.command.thrust_n);
+        // A bad blob leaves the slot empty: nothing can fly it.
+        let mut bad = blob.clone();
+        bad[60] ^= 1;
+        assert_eq!(
+            hf_model_load(&mut *slot, bad.as_ptr(), bad.len() as u32, &mut info),
+            ERR_BLOB_CRC
+        );
+        assert_eq!(hf_use_model(&mut c, &*slot), ERR_NULL);
+        assert_eq!(
+            hf_model_load(ptr::null_mut(), blob.as_ptr(), 1, &mut info),
+            ERR_NULL
+        );
+        assert_eq!(hf_use_model(ptr::null_mut(), ptr::null()), ERR_NULL);
+    }
+}
+
+#[test]
+fn a_blob_that_fails_the_self_test_is_not_loaded() {
+    // Valid in every format check, but every network parameter zero (after the mass and the
+    // motor lag): no input gain, so no thrust.
+    let blob = edited_blob(|body| body[8..].fill(0));
+    let mut slot = model_storage();
+    // SAFETY: valid pointers.
+    unsafe {
+        assert_eq!(
+            hf_blob_check(blob.as_ptr(), blob.len() as u32, ptr::null_mut()),
+            OK
+        );
+        let r = hf_model_load(
+            &mut *slot,
+            blob.as_ptr(),
+            blob.len() as u32,
+            ptr::null_mut(),
+        );
+        assert_eq!(r, ERR_SELF_TEST);
+        let mut c = init();
+        assert_eq!(hf_use_model(&mut c, &*slot), ERR_NULL);
+    }
+}

@@ -3,5 +3,6 @@
 pub mod bench;
 pub mod check;
 pub mod demo;
+pub mod score;
 pub mod train;
 pub mod vehicle_study;

@@ -62,8 +62,14 @@ pub struct MainStage {
 /// `out_gain` around the physical prior's biases ([`ModelWeights::prior`]), so J⁻¹, g and W
 /// start near the CF2X's J⁻¹, the true g and the nominal features.
 pub fn init_weights(seed: u64, out_gain: f32) -> ModelWeights {
+    init_weights_with_prior(seed, out_gain, ModelWeights::prior())
+}
+
+/// [`init_weights`] around `prior` (for example a described vehicle's,
+/// [`ModelWeights::prior_with_inertia`]).
+pub fn init_weights_with_prior(seed: u64, out_gain: f32, prior: ModelWeights) -> ModelWeights {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut w = ModelWeights::prior();
+    let mut w = prior;
     macro_rules! xavier {
         ($layer:expr, $gain:expr) => {{
             let fan_in = $layer.weight[0].len() as f32;
@@ -443,7 +449,17 @@ impl<'a> Trainer<'a> {
     fn new(cfg: &'a TrainConfig, data: &'a Windows, device: &Device) -> Self {
         let ad = device.clone().autodiff();
         let n_real = data.realizations.len().max(1);
-        let init = init_weights(cfg.seed, cfg.init_out_gain);
+        // A vehicle described at import (`import --vehicle`) starts from its own inertia.
+        let prior = data
+            .vehicle
+            .description
+            .as_ref()
+            .map_or_else(ModelWeights::prior, |v| {
+                ModelWeights::prior_with_inertia(&nalgebra::Vector3::from(
+                    v.inertia_kg_m2.map(|x| x as f32),
+                ))
+            });
+        let init = init_weights_with_prior(cfg.seed, cfg.init_out_gain, prior);
         let mut params = TModel::from_core(&init, device).tensors();
         let width = FEATURES
             + if cfg.flight_rotor_gains {

@@ -1,0 +1,414 @@
+//! `host-train score`: open-loop multi-step prediction errors of a blob on any dataset.
+//!
+//! Every window of `--horizon` + 1 continuous states (a new one every `--stride` samples) of
+//! every flight is rolled out from its first state under the logged wrench, step by step at the
+//! dataset's rate (RK4, as training integrates), by four predictors:
+//! - `learned`: the blob's model with a = 0 (an unseen flight has no learned a_j);
+//! - `nominal`: the rigid body with the vehicle's mass and inertia (`--vehicle`, else the
+//!   manifest's description or inertia, else the CF2X's) and the logged wrench;
+//! - `hold`: constant world velocity and constant body rates (p += v dt, R ← R exp(ω dt));
+//! - `zero-order`: every state held at the window's first (the error a predictor must beat to
+//!   say anything).
+//!
+//! For each predicted step k = 1 … N it reports the mean (MAE) and the root mean square (RMSE)
+//! over windows of the error norms: position ‖p̂ − p‖ (m), velocity ‖R̂ v̂ − R v‖ (world frame,
+//! m/s; the body-frame norm, as the training report uses, is kept too), attitude as the
+//! geodesic angle of R̂ Rᵀ (rad), body rates ‖ω̂ − ω‖ (rad/s). The mean of the error norm is
+//! the metric of the nano-drone system-identification benchmark (docs/benchmark.md).
+//!
+//! Writes `DIR/score.json` and `DIR/score.svg` (MAE against horizon, one panel per quantity)
+//! when `--out DIR` is given, and prints a table at 1, 10 and N steps.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use hamflight::lie;
+use hamflight::model::{rk4_step, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES};
+use nalgebra::{Matrix3, Vector3, Vector4};
+use plotters::prelude::*;
+use serde::Serialize;
+
+use crate::control::adapter::load_learned;
+use crate::io::dataset::WindowSpec;
+use crate::io::files::write_atomic;
+use crate::sim::vehicle::VehicleFile;
+use crate::train::data::{self, Windows};
+
+/// Arguments of `host-train score`.
+#[derive(Args, Clone, Debug)]
+pub struct ScoreArgs {
+    /// The weight blob (`train`'s FILE.hfw).
+    #[arg(long, value_name = "FILE.hfw")]
+    pub weights: PathBuf,
+    /// The dataset to predict (`collect` or `import` output): flights the blob did not see.
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// Predicted steps per window (the benchmark's 50 = 0.5 s at 100 Hz).
+    #[arg(long, default_value_t = 50)]
+    pub horizon: usize,
+    /// Samples between window starts (1: every start).
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// The vehicle for the nominal model (a TOML file or `cf2x`) [default: the dataset's].
+    #[arg(long, value_name = "FILE|cf2x")]
+    pub vehicle: Option<PathBuf>,
+    /// Write DIR/score.json and DIR/score.svg.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// Errors of one predictor at steps 1..N.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct HorizonErrors {
+    /// Mean over windows of ‖p̂ − p‖ (m).
+    pub pos_mae_m: Vec<f64>,
+    /// RMS of the same (m).
+    pub pos_rmse_m: Vec<f64>,
+    /// Mean of ‖R̂ v̂ − R v‖ (m/s, world frame).
+    pub vel_mae_m_s: Vec<f64>,
+    /// RMS of the same.
+    pub vel_rmse_m_s: Vec<f64>,
+    /// RMS of ‖v̂ − v‖ in the body frame (m/s): the training report's velocity error.
+    pub vel_body_rmse_m_s: Vec<f64>,
+    /// Mean geodesic angle of R̂ Rᵀ (rad).
+    pub att_mae_rad: Vec<f64>,
+    /// RMS of the same.
+    pub att_rmse_rad: Vec<f64>,
+    /// Mean of ‖ω̂ − ω‖ (rad/s, body).
+    pub rate_mae_rad_s: Vec<f64>,
+    /// RMS of the same.
+    pub rate_rmse_rad_s: Vec<f64>,
+}
+
+/// One predictor's row.
+#[derive(Clone, Debug, Serialize)]
+pub struct PredictorScore {
+    /// `learned`, `nominal`, `hold` or `zero-order`.
+    pub name: String,
+    /// Its errors.
+    pub errors: HorizonErrors,
+}
+
+/// `score.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Score {
+    /// The blob scored.
+    pub weights: String,
+    /// The dataset.
+    pub data: String,
+    /// Windows scored.
+    pub windows: usize,
+    /// Predicted steps.
+    pub horizon: usize,
+    /// The dataset's rate (Hz).
+    pub sample_hz: f64,
+    /// The nominal model's mass (kg) and diag(J) (kg·m²).
+    pub nominal_mass_kg: f64,
+    /// diag(J) of the nominal model.
+    pub nominal_inertia_kg_m2: [f64; 3],
+    /// Every predictor.
+    pub predictors: Vec<PredictorScore>,
+}
+
+/// Accumulates error norms at each step.
+struct Acc {
+    sum: Vec<[f64; 5]>,
+    sq: Vec<[f64; 5]>,
+    n: usize,
+}
+
+impl Acc {
+    fn new(n: usize) -> Self {
+        Self {
+            sum: vec![[0.0; 5]; n],
+            sq: vec![[0.0; 5]; n],
+            n: 0,
+        }
+    }
+
+    fn add(&mut self, k: usize, pred: &State, truth: &State) {
+        let world = |s: &State| s.rot * s.v_body_m_s;
+        let e = [
+            f64::from((pred.p_m - truth.p_m).norm()),
+            f64::from((world(pred) - world(truth)).norm()),
+            f64::from((pred.v_body_m_s - truth.v_body_m_s).norm()),
+            f64::from(lie::geodesic_distance(&truth.rot, &pred.rot)),
+            f64::from((pred.w_body_rad_s - truth.w_body_rad_s).norm()),
+        ];
+        if let (Some(s), Some(q)) = (self.sum.get_mut(k), self.sq.get_mut(k)) {
+            for i in 0..5 {
+                s[i] += e[i];
+                q[i] += e[i] * e[i];
+            }
+        }
+    }
+
+    fn finish(&self) -> HorizonErrors {
+        let m = self.n.max(1) as f64;
+        let mae = |i: usize| self.sum.iter().map(|s| s[i] / m).collect();
+        let rmse = |i: usize| self.sq.iter().map(|s| (s[i] / m).sqrt()).collect();
+        HorizonErrors {
+            pos_mae_m: mae(0),
+            pos_rmse_m: rmse(0),
+            vel_mae_m_s: mae(1),
+            vel_rmse_m_s: rmse(1),
+            vel_body_rmse_m_s: rmse(2),
+            att_mae_rad: mae(3),
+            att_rmse_rad: rmse(3),
+            rate_mae_rad_s: mae(4),
+            rate_rmse_rad_s: rmse(4),
+        }
+    }
+}
+
+/// Errors of `model` (a = 0) rolled out over windows `ids` of `data`.
+pub fn model_errors<M: HamiltonianModel>(
+    model: &M,
+    data: &Windows,
+    ids: &[usize],
+) -> HorizonErrors {
+    let dt = 1.0 / data.sample_hz;
+    let n = data.window_len.saturating_sub(1);
+    let mut acc = Acc::new(n);
+    let a = [0.0f32; FEATURES];
+    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
+        let Some(mut s) = w.states.first().copied() else {
+            continue;
+        };
+        for k in 0..n {
+            let (Some(u), Some(t)) = (w.u.get(k), w.states.get(k + 1)) else {
+                break;
+            };
+            s = rk4_step(model, &s, &Vector4::from(*u), &a, dt);
+            acc.add(k, &s, t);
+        }
+        acc.n += 1;
+    }
+    acc.finish()
+}
+
+/// Errors of the kinematic predictors over windows `ids`: `hold` keeps the world velocity and
+/// body rates, `zero-order` the whole first state.
+pub fn baseline_errors(data: &Windows, ids: &[usize], hold: bool) -> HorizonErrors {
+    let dt = 1.0 / data.sample_hz;
+    let n = data.window_len.saturating_sub(1);
+    let mut acc = Acc::new(n);
+    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
+        let Some(s0) = w.states.first().copied() else {
+            continue;
+        };
+        let v_world = s0.rot * s0.v_body_m_s;
+        let step = lie::exp(&(s0.w_body_rad_s * dt));
+        let mut s = s0;
+        for k in 0..n {
+            let Some(t) = w.states.get(k + 1) else { break };
+            if hold {
+                s.p_m += v_world * dt;
+                s.rot *= step;
+                // The world velocity stays: its body coordinates turn with R.
+                s.v_body_m_s = s.rot.transpose() * v_world;
+            }
+            acc.add(k, &s, t);
+        }
+        acc.n += 1;
+    }
+    acc.finish()
+}
+
+/// Scores `model` on every window of `data` (`ids` = all), with `nominal` as the physics row.
+pub fn score_windows(
+    model: &LearnedModel,
+    nominal: &NominalModel,
+    data: &Windows,
+    ids: &[usize],
+) -> Vec<PredictorScore> {
+    let row = |name: &str, errors| PredictorScore {
+        name: name.into(),
+        errors,
+    };
+    vec![
+        row("learned", model_errors(model, data, ids)),
+        row("nominal", model_errors(nominal, data, ids)),
+        row("hold", baseline_errors(data, ids, true)),
+        row("zero-order", baseline_errors(data, ids, false)),
+    ]
+}
+
+/// Runs `host-train score`.
+///
+/// # Errors
+/// An unreadable blob, dataset or vehicle file; a zero horizon or stride; a dataset with no
+/// window of horizon + 1 continuous states; a failure writing the outputs.
+pub fn run(args: &ScoreArgs) -> Result<Score> {
+    if args.horizon == 0 || args.stride == 0 {
+        bail!("--horizon and --stride must be at least 1");
+    }
+    let model = load_learned(&args.weights)?;
+    let spec = WindowSpec {
+        len: args.horizon + 1,
+        stride: args.stride,
+    };
+    let data = data::load(&args.data, spec).with_context(|| {
+        format!(
+            "scoring needs windows of {} continuous states (--horizon {})",
+            spec.len, args.horizon
+        )
+    })?;
+    let vehicle = args.vehicle.as_deref().map(VehicleFile::load).transpose()?;
+    let described = vehicle.or_else(|| data.vehicle.description.clone());
+    let (mass, j) = match &described {
+        Some(v) => (v.mass_kg, v.inertia_kg_m2),
+        None => (
+            f64::from(data.manifest_mass_kg),
+            data.vehicle
+                .inertia_kg_m2
+                .unwrap_or(VehicleFile::cf2x().inertia_kg_m2),
+        ),
+    };
+    let nominal = NominalModel::new(
+        mass as f32,
+        Matrix3::from_diagonal(&Vector3::from(j.map(|x| x as f32))),
+    );
+    let ids: Vec<usize> = (0..data.windows.len()).collect();
+    let score = Score {
+        weights: args.weights.display().to_string(),
+        data: args.data.display().to_string(),
+        windows: ids.len(),
+        horizon: args.horizon,
+        sample_hz: f64::from(data.sample_hz),
+        nominal_mass_kg: mass,
+        nominal_inertia_kg_m2: j,
+        predictors: score_windows(&model, &nominal, &data, &ids),
+    };
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create `{}`", dir.display()))?;
+        write_atomic(
+            &dir.join("score.json"),
+            serde_json::to_string_pretty(&score)?.as_bytes(),
+        )?;
+        plot(&score, &dir.join("score.svg"))?;
+    }
+    Ok(score)
+}
+
+/// The printed table: MAE of each quantity at 1, 10 and N steps, one row per predictor.
+pub fn table(s: &Score) -> String {
+    let steps: Vec<usize> = [1, 10, s.horizon]
+        .into_iter()
+        .filter(|k| *k <= s.horizon)
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let at = |v: &[f64], k: usize| v.get(k - 1).copied().unwrap_or(f64::NAN);
+    let mut out = format!(
+        "{} windows of {} steps at {:.0} Hz; MAE (mean error norm) at steps {:?}\n\
+         {:<11} {:>26} {:>26} {:>26} {:>26}\n",
+        s.windows,
+        s.horizon,
+        s.sample_hz,
+        steps,
+        "predictor",
+        "position (m)",
+        "velocity (m/s, world)",
+        "attitude (rad)",
+        "body rates (rad/s)"
+    );
+    for p in &s.predictors {
+        let e = &p.errors;
+        let cell = |v: &[f64]| {
+            steps
+                .iter()
+                .map(|k| format!("{:.4}", at(v, *k)))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        out += &format!(
+            "{:<11} {:>26} {:>26} {:>26} {:>26}\n",
+            p.name,
+            cell(&e.pos_mae_m),
+            cell(&e.vel_mae_m_s),
+            cell(&e.att_mae_rad),
+            cell(&e.rate_mae_rad_s)
+        );
+    }
+    out
+}
+
+const COLOURS: [RGBColor; 4] = [
+    RGBColor(214, 39, 40),
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+    RGBColor(127, 127, 127),
+];
+
+fn pe<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("plotting failed: {e:?}")
+}
+
+/// MAE against the horizon (s), one panel per quantity, one line per predictor.
+fn plot(s: &Score, path: &Path) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 750)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let root = root
+            .titled(
+                &format!(
+                    "open-loop prediction error, {} windows ({})",
+                    s.windows, s.data
+                ),
+                ("sans-serif", 18),
+            )
+            .map_err(pe)?;
+        let dt = 1.0 / s.sample_hz;
+        let t_max = s.horizon as f64 * dt;
+        type Pick = fn(&HorizonErrors) -> &Vec<f64>;
+        let panels: [(&str, Pick); 4] = [
+            ("position MAE (m)", |e| &e.pos_mae_m),
+            ("velocity MAE (m/s)", |e| &e.vel_mae_m_s),
+            ("attitude MAE (rad)", |e| &e.att_mae_rad),
+            ("body-rate MAE (rad/s)", |e| &e.rate_mae_rad_s),
+        ];
+        for (area, (label, pick)) in root.split_evenly((2, 2)).iter().zip(panels) {
+            let hi = s
+                .predictors
+                .iter()
+                .flat_map(|p| pick(&p.errors).iter().copied())
+                .filter(|x| x.is_finite())
+                .fold(1e-6, f64::max);
+            let mut ch = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..t_max, 0.0..hi * 1.05)
+                .map_err(pe)?;
+            ch.configure_mesh()
+                .x_desc("horizon (s)")
+                .y_desc(label)
+                .draw()
+                .map_err(pe)?;
+            for (i, p) in s.predictors.iter().enumerate() {
+                let c = COLOURS[i % COLOURS.len()];
+                let pts: Vec<(f64, f64)> = pick(&p.errors)
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| ((k + 1) as f64 * dt, *v))
+                    .collect();
+                ch.draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                    .map_err(pe)?
+                    .label(p.name.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+            }
+            ch.configure_series_labels()
+                .position(SeriesLabelPosition::UpperLeft)
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.8))
+                .draw()
+                .map_err(pe)?;
+        }
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
