@@ -40,6 +40,13 @@ Models:
               yaw signs - + - +), J = diag(2.3951e-5, 2.3951e-5, 3.2347e-5),
               Euler equation, RK4 at 100 Hz
 
+With `--dataset DIR` (a `host-train import` of the test CSVs) it scores the
+windows `host-train score` scores instead: continuous stretches of the
+imported flights only (repeated states dropped, take-off and landing
+trimmed), the wrench columns as the input. That is the like-for-like check
+of the Rust numbers (zoh = zero-order, const_vw = hold, phys_full = nominal);
+the benchmark protocol is the `--csv` mode.
+
 Dependencies: numpy, pandas. Example:
     /work/bench-venv/bin/python tools/benchmark/reference_score.py \\
         --csv /work/nanodrone-csv --out /work/nanodrone-csv/reference_score.json
@@ -114,16 +121,22 @@ def geodesic(qt, qp):
 
 
 # ---------------------------------------------------------------- models
-def forces(om, full):
+def wrench_of_speeds(om):
+    """[T, tau_x, tau_y, tau_z] of rotor speeds (rad/s), published constants, hamflight numbering."""
     o2 = om**2
-    if not full:
-        T = np.clip(KF_PAPER * o2.sum(-1), 0.0, TW_PAPER * M * G)
-        return T, np.zeros(o2.shape[:-1] + (3,))
     T = KF * o2.sum(-1)
     tx = KF * ARM * ((o2[..., 2] + o2[..., 3]) - (o2[..., 0] + o2[..., 1]))
     ty = KF * ARM * ((o2[..., 1] + o2[..., 2]) - (o2[..., 0] + o2[..., 3]))
     tz = KM * (o2 @ YAW)
-    return T, np.stack([tx, ty, tz], -1)
+    return np.stack([T, tx, ty, tz], -1)
+
+
+def forces(u, full):
+    """Thrust and torques of a wrench row u = [T, tau] for the two physics models."""
+    if not full:  # the benchmark's model: its own k_F, thrust clamped, no torques
+        T = np.clip(u[..., 0] * (KF_PAPER / KF), 0.0, TW_PAPER * M * G)
+        return T, np.zeros(u.shape[:-1] + (3,))
+    return u[..., 0], u[..., 1:]
 
 
 def deriv(s, T, tau, full):
@@ -152,7 +165,7 @@ def rk4(s, T, tau, full):
 
 
 def rollout(model, x0, om):
-    """x0: tuple of (W,3),(W,3),(W,4),(W,3); om: (W,H,4). Returns list of H states."""
+    """x0: tuple of (W,3),(W,3),(W,4),(W,3); om: (W,H,4) wrench rows [T, tau]. Returns H states."""
     out = []
     s = x0
     for k in range(H):
@@ -179,19 +192,56 @@ def load_run(path):
     e = c[["erpm1", "erpm2", "erpm3", "erpm4"]].to_numpy(float)
     e[~np.isfinite(e) | (e >= GLITCH)] = np.nan
     e = pd.DataFrame(e).ffill().bfill().to_numpy()
-    return p, v, q, w, e * ERPM_TO_RAD_S
+    return p, v, q, w, wrench_of_speeds(e * ERPM_TO_RAD_S)
+
+
+def rot_to_quat(R):
+    """(w, x, y, z) of rotation matrices (N,3,3), w >= 0."""
+    tr = np.trace(R, axis1=1, axis2=2)
+    q = np.empty((len(R), 4))
+    q[:, 0] = np.sqrt(np.maximum(1.0 + tr, 1e-12)) / 2
+    q[:, 1] = (R[:, 2, 1] - R[:, 1, 2]) / (4 * q[:, 0])
+    q[:, 2] = (R[:, 0, 2] - R[:, 2, 0]) / (4 * q[:, 0])
+    q[:, 3] = (R[:, 1, 0] - R[:, 0, 1]) / (4 * q[:, 0])
+    return qnorm(q)  # tilts here stay far below 180 deg, where this branch is exact
+
+
+def load_dataset(d):
+    """Continuous stretches of a hamflight dataset (import output), as `host-train score`
+    cuts them: per realization and flight, split where the time step is not 1/sample_hz
+    within 10 % (dropped repeated states, gaps)."""
+    man = json.load(open(os.path.join(d, "manifest.json")))
+    dt = 1.0 / man["sample_hz"]
+    segs, names = [], []
+    for r in man["realizations"]:
+        c = pd.read_csv(os.path.join(d, r["file"]))
+        for f, g in c.groupby("flight"):
+            t = g["t_s"].to_numpy()
+            cut = np.r_[0, np.nonzero(np.abs(np.diff(t) - dt) > 0.1 * dt)[0] + 1, len(t)]
+            R = g[["r11", "r12", "r13", "r21", "r22", "r23", "r31", "r32", "r33"]].to_numpy().reshape(-1, 3, 3)
+            p = g[["px", "py", "pz"]].to_numpy()
+            vb = g[["vx", "vy", "vz"]].to_numpy()
+            v = np.einsum("nij,nj->ni", R, vb)
+            w = g[["wx", "wy", "wz"]].to_numpy()
+            u = g[["f_n", "tau_x_nm", "tau_y_nm", "tau_z_nm"]].to_numpy()
+            q = rot_to_quat(R)
+            for a, b in zip(cut[:-1], cut[1:]):
+                if b - a >= H + 1:
+                    segs.append((p[a:b], v[a:b], q[a:b], w[a:b], u[a:b]))
+                    names.append(f"{os.path.basename(r['source_file'])}#{f}[{a}:{b}]")
+    return segs, names
 
 
 def score_run(model, run):
     """Per-run predictions: errors[h-1] arrays over windows (clean), and the
     predicted states, for the protocol aggregation."""
-    p, v, q, w, om = run
+    p, v, q, w, u = run
     N = len(p)
     W = N - H
     idx = np.arange(W)
     x0 = (p[idx], v[idx], q[idx], w[idx])
-    oms = np.stack([om[idx + k] for k in range(H)], 1)
-    preds = rollout(model, x0, oms)
+    us = np.stack([u[idx + k] for k in range(H)], 1)
+    preds = rollout(model, x0, us)
     return preds
 
 
@@ -202,7 +252,7 @@ def errors(pred, truth):
                 att=geodesic(tq, pq), rates=np.linalg.norm(pw - tw, axis=-1))
 
 
-def evaluate(model, runs):
+def evaluate(model, runs, per_run_rows=True):
     clean = {k: np.zeros(H) for k in ("pos", "vel", "att", "rates")}
     counts = 0
     pooled_pred = [[] for _ in range(H)]
@@ -221,7 +271,7 @@ def evaluate(model, runs):
         pooled_t1.append((p[1:1 + W], v[1:1 + W], q[1:1 + W], w[1:1 + W]))
     clean = {k: (v / counts).tolist() for k, v in clean.items()}
     per_run = []
-    for run in runs:  # the clean errors of each run alone
+    for run in (runs if per_run_rows else []):  # the clean errors of each run alone
         p, v, q, w, _ = run
         W = len(p) - H
         preds = score_run(model, run)
@@ -242,28 +292,36 @@ def evaluate(model, runs):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n\n", 1)[1])
-    ap.add_argument("--csv", required=True, help="folder written by nanodrone.py (uses <csv>/test/*.csv)")
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--csv", help="folder written by nanodrone.py (uses <csv>/test/*.csv): the benchmark protocol")
+    src.add_argument("--dataset", help="a hamflight dataset (host-train import of the test CSVs): the windows "
+                     "`host-train score` uses (continuous stretches only), for a like-for-like cross-check")
     ap.add_argument("--models", default="zoh,const_vw,phys_paper,phys_full")
     ap.add_argument("--out", help="write all horizons as JSON")
     args = ap.parse_args()
 
-    files = sorted(glob.glob(os.path.join(args.csv, "test", "*.csv")))
-    runs = [load_run(f) for f in files]
-    print("test runs:", ", ".join(os.path.basename(f)[:-4] for f in files),
-          f"; windows per run: {[len(r[0]) - H for r in runs]}")
-    result = dict(runs=[os.path.basename(f)[:-4] for f in files], horizon=H, dt=DT,
+    if args.csv:
+        files = sorted(glob.glob(os.path.join(args.csv, "test", "*.csv")))
+        runs = [load_run(f) for f in files]
+        names = [os.path.basename(f)[:-4] for f in files]
+        print("test runs:", ", ".join(names), f"; windows per run: {[len(r[0]) - H for r in runs]}")
+    else:
+        runs, names = load_dataset(args.dataset)
+        print(f"dataset {args.dataset}: {len(runs)} continuous stretches of >= {H + 1} states, "
+              f"{sum(len(r[0]) - H for r in runs)} windows (only the 'clean' rows are meaningful here)")
+    result = dict(runs=names, horizon=H, dt=DT,
                   windows_per_run=[len(r[0]) - H for r in runs], models={}, paper=PAPER)
     hdr = f"{'model':12s} {'agg':8s}  {'pos m':>15s}  {'vel m/s':>15s}  {'att rad':>15s}  {'rates rad/s':>15s}   (h=10 / h=50)"
     print(hdr)
     for m in args.models.split(","):
-        r = evaluate(m, runs)
+        r = evaluate(m, runs, per_run_rows=bool(args.csv))
         result["models"][m] = r
         for agg in ("protocol", "clean"):
             d = r[agg]
             print(f"{m:12s} {agg:8s}  " + "  ".join(f"{d[k][9]:7.4f}/{d[k][49]:7.4f}" for k in ("pos", "vel", "att", "rates")))
     for m, d in PAPER.items():
         print(f"{'paper ' + m:21s}  " + "  ".join(f"{d[k][0]:7.4f}/{d[k][1]:7.4f}" for k in ("pos", "vel", "att", "rates")))
-    if "phys_paper" in result["models"]:
+    if "phys_paper" in result["models"] and args.csv:
         d = result["models"]["phys_paper"]["protocol"]
         print("phys_paper vs paper physics (ours/paper - 1): " + "  ".join(
             f"{k} {100*(d[k][9]/PAPER['physics'][k][0]-1):+.0f}%/{100*(d[k][49]/PAPER['physics'][k][1]-1):+.0f}%"
