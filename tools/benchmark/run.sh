@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# convert -> import -> train -> score on the nanodrone-sysid-benchmark flights.
+#
+#   tools/benchmark/run.sh [WORK_DIR]
+#
+# Environment (defaults in brackets):
+#   NANODRONE_GIT     benchmark clone, bare is fine [/work/.mirror/idsia-robotics+nanodrone-sysid-benchmark/repo]
+#   NANODRONE_CHECKOUT  a working tree instead of NANODRONE_GIT (optional)
+#   NANODRONE_COMMIT  [b0cf4b3144e84716546ab8bb028d7eacc42475c2]
+#   PY                python with numpy, pandas, pyarrow [/work/bench-venv/bin/python]
+#   HOST_TRAIN        host-train binary [$CARGO_TARGET_DIR/release/host-train or target/release/host-train]
+#   EPOCHS            training epochs [20]
+#   WINDOW_LEN        training window, states [11]
+#   STRIDE            training window stride [2]
+#   SEED              [0]
+# WORK_DIR (outside the repository) gets csv/, dataset/, test-dataset/, model.hfw, score/,
+# reference_score*.json and the logs. Nothing is written into the repository.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+work="${1:-/work/nanodrone-run}"
+GIT_DIR_NANO="${NANODRONE_GIT:-/work/.mirror/idsia-robotics+nanodrone-sysid-benchmark/repo}"
+COMMIT="${NANODRONE_COMMIT:-b0cf4b3144e84716546ab8bb028d7eacc42475c2}"
+PY="${PY:-/work/bench-venv/bin/python}"
+HT="${HOST_TRAIN:-${CARGO_TARGET_DIR:-$repo/target}/release/host-train}"
+EPOCHS="${EPOCHS:-20}"
+WINDOW_LEN="${WINDOW_LEN:-11}"
+STRIDE="${STRIDE:-2}"
+SEED="${SEED:-0}"
+
+case "$(realpath -m "$work")/" in "$repo"/*) echo "WORK_DIR must be outside the repository" >&2; exit 2;; esac
+mkdir -p "$work"
+
+echo "== 1. convert"
+# no --motor-tau-s: the CSVs carry MEASURED rotor speeds, which must not go through a motor lag again
+if [ -n "${NANODRONE_CHECKOUT:-}" ]; then src=(--checkout "$NANODRONE_CHECKOUT"); else src=(--git-dir "$GIT_DIR_NANO"); fi
+"$PY" "$here/nanodrone.py" "${src[@]}" --commit "$COMMIT" --out "$work/csv" | tee "$work/convert.log"
+
+echo "== 2. reference score (Python, no training)"
+"$PY" "$here/reference_score.py" --csv "$work/csv" --out "$work/reference_score.json" | tee "$work/reference_score.log"
+
+echo "== 3. import (train runs, and the melon test runs as a second dataset)"
+"$HT" import --vehicle "$work/csv/vehicle.toml" --motor-poles 12 --format csv \
+    --out "$work/dataset" "$work"/csv/train/*.csv 2>&1 | tee "$work/import.log"
+"$HT" import --vehicle "$work/csv/vehicle.toml" --motor-poles 12 --format csv \
+    --out "$work/test-dataset" "$work"/csv/test/*.csv 2>&1 | tee "$work/import-test.log"
+
+echo "== 4. train"
+# --no-flight-check: the trainer's SITL flight check (adaptive law, windy spiral) crashes on the
+# models learned from these flights; the benchmark scores predictions, not the controller.
+"$HT" train --data "$work/dataset" --out "$work/model.hfw" --epochs "$EPOCHS" --seed "$SEED" \
+    --window-len "$WINDOW_LEN" --stride "$STRIDE" --no-flight-check 2>&1 | tee "$work/train.log"
+
+echo "== 5. score (held-out melon runs) and the Python check on the same windows"
+"$HT" score --weights "$work/model.hfw" --data "$work/test-dataset" --horizon 50 \
+    --out "$work/score" 2>&1 | tee "$work/score.log"
+"$PY" "$here/reference_score.py" --dataset "$work/test-dataset" \
+    --out "$work/reference_score_dataset.json" | tee "$work/reference_score_dataset.log"
+
+echo "== done: $work/score/score.json (host-train score on the imported test flights),"
+echo "   $work/reference_score_dataset.json (Python, the same windows),"
+echo "   $work/reference_score.json (Python, the benchmark protocol on the raw test CSVs)"
