@@ -4,10 +4,11 @@
 #   tools/benchmark/run.sh [WORK_DIR]
 #
 # Environment (defaults in brackets):
-#   NANODRONE_GIT     benchmark clone, bare is fine [/work/.mirror/idsia-robotics+nanodrone-sysid-benchmark/repo]
+#   NANODRONE_GIT     a clone of github.com/idsia-robotics/nanodrone-sysid-benchmark (bare is fine;
+#                     it must hold the commit below: `git clone` then `git fetch origin <commit>`)
 #   NANODRONE_CHECKOUT  a working tree instead of NANODRONE_GIT (optional)
 #   NANODRONE_COMMIT  [b0cf4b3144e84716546ab8bb028d7eacc42475c2]
-#   PY                python with numpy, pandas, pyarrow [/work/bench-venv/bin/python]
+#   PY                python with numpy, pandas, pyarrow [a venv made in WORK_DIR/venv on first run]
 #   HOST_TRAIN        host-train binary [$CARGO_TARGET_DIR/release/host-train or target/release/host-train]
 #   EPOCHS            training epochs [20]
 #   WINDOW_LEN        training window, states [11]
@@ -19,10 +20,10 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
-work="${1:-/work/nanodrone-run}"
-GIT_DIR_NANO="${NANODRONE_GIT:-/work/.mirror/idsia-robotics+nanodrone-sysid-benchmark/repo}"
+work="${1:-$HOME/nanodrone-run}"
+GIT_DIR_NANO="${NANODRONE_GIT:-}"
 COMMIT="${NANODRONE_COMMIT:-b0cf4b3144e84716546ab8bb028d7eacc42475c2}"
-PY="${PY:-/work/bench-venv/bin/python}"
+PY="${PY:-}"
 HT="${HOST_TRAIN:-${CARGO_TARGET_DIR:-$repo/target}/release/host-train}"
 EPOCHS="${EPOCHS:-20}"
 WINDOW_LEN="${WINDOW_LEN:-11}"
@@ -30,7 +31,21 @@ STRIDE="${STRIDE:-2}"
 SEED="${SEED:-0}"
 
 case "$(realpath -m "$work")/" in "$repo"/*) echo "WORK_DIR must be outside the repository" >&2; exit 2;; esac
+if [ -z "$GIT_DIR_NANO" ] && [ -z "${NANODRONE_CHECKOUT:-}" ]; then
+    echo "set NANODRONE_GIT to a clone of https://github.com/idsia-robotics/nanodrone-sysid-benchmark" >&2
+    echo "(or NANODRONE_CHECKOUT to a working tree at $COMMIT)" >&2
+    exit 2
+fi
 mkdir -p "$work"
+if [ -z "$PY" ]; then
+    if [ ! -x "$work/venv/bin/python" ]; then
+        echo "== 0. a Python venv with numpy, pandas, pyarrow in $work/venv"
+        python3 -m venv "$work/venv"
+        "$work/venv/bin/pip" install --quiet numpy pandas pyarrow
+    fi
+    PY="$work/venv/bin/python"
+fi
+[ -x "$HT" ] || { echo "build host-train first: cargo build --release -p host-train ($HT missing)" >&2; exit 2; }
 
 echo "== 1. convert"
 # no --motor-tau-s: the CSVs carry MEASURED rotor speeds, which must not go through a motor lag again
