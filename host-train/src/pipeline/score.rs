@@ -26,7 +26,6 @@ use clap::Args;
 use hamflight::lie;
 use hamflight::model::{rk4_step, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES};
 use nalgebra::{Matrix3, Vector3, Vector4};
-use plotters::prelude::*;
 use serde::Serialize;
 
 use crate::control::adapter::load_learned;
@@ -336,79 +335,33 @@ pub fn table(s: &Score) -> String {
     out
 }
 
-const COLOURS: [RGBColor; 4] = [
-    RGBColor(214, 39, 40),
-    RGBColor(31, 119, 180),
-    RGBColor(44, 160, 44),
-    RGBColor(127, 127, 127),
-];
-
-fn pe<E: std::fmt::Debug>(e: E) -> anyhow::Error {
-    anyhow::anyhow!("plotting failed: {e:?}")
-}
-
 /// MAE against the horizon (s), one panel per quantity, one line per predictor.
 fn plot(s: &Score, path: &Path) -> Result<()> {
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, (1100, 750)).into_drawing_area();
-        root.fill(&WHITE).map_err(pe)?;
-        let root = root
-            .titled(
-                &format!(
-                    "open-loop prediction error, {} windows ({})",
-                    s.windows, s.data
-                ),
-                ("sans-serif", 18),
-            )
-            .map_err(pe)?;
-        let dt = 1.0 / s.sample_hz;
-        let t_max = s.horizon as f64 * dt;
-        type Pick = fn(&HorizonErrors) -> &Vec<f64>;
-        let panels: [(&str, Pick); 4] = [
-            ("position MAE (m)", |e| &e.pos_mae_m),
-            ("velocity MAE (m/s)", |e| &e.vel_mae_m_s),
-            ("attitude MAE (rad)", |e| &e.att_mae_rad),
-            ("body-rate MAE (rad/s)", |e| &e.rate_mae_rad_s),
-        ];
-        for (area, (label, pick)) in root.split_evenly((2, 2)).iter().zip(panels) {
-            let hi = s
+    type Pick = fn(&HorizonErrors) -> &Vec<f64>;
+    let picks: [(&str, Pick); 4] = [
+        ("position MAE (m)", |e| &e.pos_mae_m),
+        ("velocity MAE (m/s)", |e| &e.vel_mae_m_s),
+        ("attitude MAE (rad)", |e| &e.att_mae_rad),
+        ("body-rate MAE (rad/s)", |e| &e.rate_mae_rad_s),
+    ];
+    let panels: Vec<crate::report::plot::HorizonPanel<'_>> = picks
+        .iter()
+        .map(|(label, pick)| {
+            let lines = s
                 .predictors
                 .iter()
-                .flat_map(|p| pick(&p.errors).iter().copied())
-                .filter(|x| x.is_finite())
-                .fold(1e-6, f64::max);
-            let mut ch = ChartBuilder::on(area)
-                .margin(10)
-                .x_label_area_size(35)
-                .y_label_area_size(60)
-                .build_cartesian_2d(0.0..t_max, 0.0..hi * 1.05)
-                .map_err(pe)?;
-            ch.configure_mesh()
-                .x_desc("horizon (s)")
-                .y_desc(label)
-                .draw()
-                .map_err(pe)?;
-            for (i, p) in s.predictors.iter().enumerate() {
-                let c = COLOURS[i % COLOURS.len()];
-                let pts: Vec<(f64, f64)> = pick(&p.errors)
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| ((k + 1) as f64 * dt, *v))
-                    .collect();
-                ch.draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                    .map_err(pe)?
-                    .label(p.name.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-            }
-            ch.configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .border_style(BLACK)
-                .background_style(WHITE.mix(0.8))
-                .draw()
-                .map_err(pe)?;
-        }
-        root.present().map_err(pe)?;
-    }
-    write_atomic(path, buf.as_bytes())
+                .map(|p| (p.name.as_str(), pick(&p.errors).as_slice()))
+                .collect();
+            (*label, lines)
+        })
+        .collect();
+    crate::report::plot::horizon_svg(
+        &format!(
+            "open-loop prediction error, {} windows ({})",
+            s.windows, s.data
+        ),
+        1.0 / s.sample_hz,
+        &panels,
+        path,
+    )
 }

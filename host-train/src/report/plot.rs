@@ -240,6 +240,63 @@ where
     write_atomic(path, buf.as_bytes())
 }
 
+/// One panel of [`horizon_svg`]: its y label and its lines, `(name, values at steps 1..N)`.
+pub type HorizonPanel<'a> = (&'a str, Vec<(&'a str, &'a [f64])>);
+
+/// Errors against the prediction horizon: one panel per `(y label, lines)` in a 2 × 2 grid,
+/// one line per `(name, values at steps 1..N)`, the x axis in seconds (step k at k `dt_s`).
+pub fn horizon_svg(title: &str, dt_s: f64, panels: &[HorizonPanel<'_>], path: &Path) -> Result<()> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (1100, 750)).into_drawing_area();
+        root.fill(&WHITE).map_err(pe)?;
+        let root = root.titled(title, ("sans-serif", 18)).map_err(pe)?;
+        let steps = panels
+            .iter()
+            .flat_map(|(_, lines)| lines.iter().map(|(_, v)| v.len()))
+            .max()
+            .unwrap_or(1);
+        let t_max = steps as f64 * dt_s;
+        for (area, (label, lines)) in root.split_evenly((2, 2)).iter().zip(panels) {
+            let hi = lines
+                .iter()
+                .flat_map(|(_, v)| v.iter().copied())
+                .filter(|x| x.is_finite())
+                .fold(1e-6, f64::max);
+            let mut ch = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..t_max, 0.0..hi * 1.05)
+                .map_err(pe)?;
+            ch.configure_mesh()
+                .x_desc("horizon (s)")
+                .y_desc(*label)
+                .draw()
+                .map_err(pe)?;
+            for (i, (name, v)) in lines.iter().enumerate() {
+                let c = PALETTE[i % PALETTE.len()];
+                let pts = v
+                    .iter()
+                    .enumerate()
+                    .map(|(k, y)| ((k + 1) as f64 * dt_s, *y));
+                ch.draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                    .map_err(pe)?
+                    .label(name.to_string())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+            }
+            ch.configure_series_labels()
+                .position(SeriesLabelPosition::UpperLeft)
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.8))
+                .draw()
+                .map_err(pe)?;
+        }
+        root.present().map_err(pe)?;
+    }
+    write_atomic(path, buf.as_bytes())
+}
+
 /// The adaptation estimate a(t) of one flight, one line per component (the paper's Fig. 2
 /// companion: how fast the disturbance weights settle).
 pub fn adaptation_svg(label: &str, log: &FlightLog, path: &Path) -> Result<()> {
