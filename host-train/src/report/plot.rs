@@ -258,16 +258,28 @@ pub fn horizon_svg(title: &str, dt_s: f64, panels: &[HorizonPanel<'_>], path: &P
             .unwrap_or(1);
         let t_max = steps as f64 * dt_s;
         for (area, (label, lines)) in root.split_evenly((2, 2)).iter().zip(panels) {
-            let hi = lines
+            // A line that diverges (3× above every other) runs off the top instead of
+            // flattening the others.
+            let mut tops: Vec<f64> = lines
                 .iter()
-                .flat_map(|(_, v)| v.iter().copied())
-                .filter(|x| x.is_finite())
-                .fold(1e-6, f64::max);
+                .map(|(_, v)| {
+                    v.iter()
+                        .copied()
+                        .filter(|x| x.is_finite())
+                        .fold(1e-6, f64::max)
+                })
+                .collect();
+            tops.sort_by(|a, b| b.total_cmp(a));
+            let hi = match (tops.first(), tops.get(1)) {
+                (Some(&a), Some(&b)) if a > 3.0 * b => 1.5 * b,
+                (Some(&a), _) => a * 1.05,
+                _ => 1.0,
+            };
             let mut ch = ChartBuilder::on(area)
                 .margin(10)
                 .x_label_area_size(35)
                 .y_label_area_size(60)
-                .build_cartesian_2d(0.0..t_max, 0.0..hi * 1.05)
+                .build_cartesian_2d(0.0..t_max, 0.0..hi)
                 .map_err(pe)?;
             ch.configure_mesh()
                 .x_desc("horizon (s)")
