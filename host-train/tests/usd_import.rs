@@ -555,7 +555,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         });
     }
     let a = args(Path::new("unused"));
-    let flights = import::airborne_flights(&samples, 500.0, &a);
+    let flights = import::airborne_flights(&samples, &a);
     let spans: Vec<(f64, f64, usize)> = flights
         .iter()
         .map(|f| {
@@ -573,7 +573,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         max_gap_s: 0.02,
         ..a
     };
-    let flights = import::airborne_flights(&samples, 500.0, &a);
+    let flights = import::airborne_flights(&samples, &a);
     let spans: Vec<(f64, f64, usize)> = flights
         .iter()
         .map(|f| {
@@ -591,7 +591,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         .all(|s| s.state.p_m.z >= 0.1 && s.wrench[0] > 0.0));
     // Without trimming, the stretches are the airborne samples themselves.
     let untrimmed = ImportArgs { trim_s: 0.0, ..a };
-    let n: usize = import::airborne_flights(&samples, 500.0, &untrimmed)
+    let n: usize = import::airborne_flights(&samples, &untrimmed)
         .iter()
         .map(|f| f.samples.len())
         .sum();

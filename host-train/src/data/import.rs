@@ -769,7 +769,7 @@ fn grounded(seg: &[Sample], weight_n: f64, args: &ImportArgs) -> Vec<bool> {
 
 /// The airborne flights of `samples` by the documented rule (module docs). Gaps up to
 /// `--max-gap-s` stay inside a flight (training's windows never span one).
-pub fn airborne_flights(samples: &[Sample], _sample_hz: f64, args: &ImportArgs) -> Vec<Flight> {
+pub fn airborne_flights(samples: &[Sample], args: &ImportArgs) -> Vec<Flight> {
     let weight = args.mass_kg.unwrap_or(f64::NAN) * args.gravity_m_s2.unwrap_or(9.8);
     let mut flights = Vec::new();
     for seg in stretches(samples, args.max_gap_s) {
@@ -994,7 +994,7 @@ pub fn run(args: &ImportArgs) -> Result<Vec<FileSummary>> {
                 inputs[0].0.display()
             );
         }
-        let flights = airborne_flights(&d.samples, sample_hz, args);
+        let flights = airborne_flights(&d.samples, args);
         if flights.is_empty() {
             bail!(
                 "`{}`: no airborne samples (z ≥ {} m, and not at thrust < {} m g standing still \

@@ -24,8 +24,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hamflight::lie;
-use hamflight::model::{rk4_step, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES};
-use nalgebra::{Matrix3, Vector3, Vector4};
+use hamflight::model::{LearnedModel, NominalModel};
+use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
 use crate::control::adapter::load_learned;
@@ -33,6 +33,8 @@ use crate::io::dataset::WindowSpec;
 use crate::io::files::write_atomic;
 use crate::sim::vehicle::VehicleFile;
 use crate::train::data::{self, Windows};
+use crate::train::predict::Acc;
+pub use crate::train::predict::{model_errors, HorizonErrors};
 
 /// Arguments of `host-train score`.
 #[derive(Args, Clone, Debug)]
@@ -55,29 +57,6 @@ pub struct ScoreArgs {
     /// Write DIR/score.json and DIR/score.svg.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-}
-
-/// Errors of one predictor at steps 1..N.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct HorizonErrors {
-    /// Mean over windows of ‖p̂ − p‖ (m).
-    pub pos_mae_m: Vec<f64>,
-    /// RMS of the same (m).
-    pub pos_rmse_m: Vec<f64>,
-    /// Mean of ‖R̂ v̂ − R v‖ (m/s, world frame).
-    pub vel_mae_m_s: Vec<f64>,
-    /// RMS of the same.
-    pub vel_rmse_m_s: Vec<f64>,
-    /// RMS of ‖v̂ − v‖ in the body frame (m/s): the training report's velocity error.
-    pub vel_body_rmse_m_s: Vec<f64>,
-    /// Mean geodesic angle of R̂ Rᵀ (rad).
-    pub att_mae_rad: Vec<f64>,
-    /// RMS of the same.
-    pub att_rmse_rad: Vec<f64>,
-    /// Mean of ‖ω̂ − ω‖ (rad/s, body).
-    pub rate_mae_rad_s: Vec<f64>,
-    /// RMS of the same.
-    pub rate_rmse_rad_s: Vec<f64>,
 }
 
 /// One predictor's row.
@@ -108,83 +87,6 @@ pub struct Score {
     pub nominal_inertia_kg_m2: [f64; 3],
     /// Every predictor.
     pub predictors: Vec<PredictorScore>,
-}
-
-/// Accumulates error norms at each step.
-struct Acc {
-    sum: Vec<[f64; 5]>,
-    sq: Vec<[f64; 5]>,
-    n: usize,
-}
-
-impl Acc {
-    fn new(n: usize) -> Self {
-        Self {
-            sum: vec![[0.0; 5]; n],
-            sq: vec![[0.0; 5]; n],
-            n: 0,
-        }
-    }
-
-    fn add(&mut self, k: usize, pred: &State, truth: &State) {
-        let world = |s: &State| s.rot * s.v_body_m_s;
-        let e = [
-            f64::from((pred.p_m - truth.p_m).norm()),
-            f64::from((world(pred) - world(truth)).norm()),
-            f64::from((pred.v_body_m_s - truth.v_body_m_s).norm()),
-            f64::from(lie::geodesic_distance(&truth.rot, &pred.rot)),
-            f64::from((pred.w_body_rad_s - truth.w_body_rad_s).norm()),
-        ];
-        if let (Some(s), Some(q)) = (self.sum.get_mut(k), self.sq.get_mut(k)) {
-            for i in 0..5 {
-                s[i] += e[i];
-                q[i] += e[i] * e[i];
-            }
-        }
-    }
-
-    fn finish(&self) -> HorizonErrors {
-        let m = self.n.max(1) as f64;
-        let mae = |i: usize| self.sum.iter().map(|s| s[i] / m).collect();
-        let rmse = |i: usize| self.sq.iter().map(|s| (s[i] / m).sqrt()).collect();
-        HorizonErrors {
-            pos_mae_m: mae(0),
-            pos_rmse_m: rmse(0),
-            vel_mae_m_s: mae(1),
-            vel_rmse_m_s: rmse(1),
-            vel_body_rmse_m_s: rmse(2),
-            att_mae_rad: mae(3),
-            att_rmse_rad: rmse(3),
-            rate_mae_rad_s: mae(4),
-            rate_rmse_rad_s: rmse(4),
-        }
-    }
-}
-
-/// Errors of `model` (a = 0) rolled out over windows `ids` of `data`.
-pub fn model_errors<M: HamiltonianModel>(
-    model: &M,
-    data: &Windows,
-    ids: &[usize],
-) -> HorizonErrors {
-    let dt = 1.0 / data.sample_hz;
-    let n = data.window_len.saturating_sub(1);
-    let mut acc = Acc::new(n);
-    let a = [0.0f32; FEATURES];
-    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
-        let Some(mut s) = w.states.first().copied() else {
-            continue;
-        };
-        for k in 0..n {
-            let (Some(u), Some(t)) = (w.u.get(k), w.states.get(k + 1)) else {
-                break;
-            };
-            s = rk4_step(model, &s, &Vector4::from(*u), &a, dt);
-            acc.add(k, &s, t);
-        }
-        acc.n += 1;
-    }
-    acc.finish()
 }
 
 /// Errors of the kinematic predictors over windows `ids`: `hold` keeps the world velocity and

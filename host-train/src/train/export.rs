@@ -10,10 +10,8 @@ use super::data::Windows;
 use super::r#loop::{EpochStats, Trained};
 use super::TrainConfig;
 use anyhow::Result;
-use hamflight::lie;
 use hamflight::model::{
-    rk4_step, true_input_gain, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES,
-    GRAVITY_M_S2,
+    true_input_gain, HamiltonianModel, LearnedModel, NominalModel, State, FEATURES, GRAVITY_M_S2,
 };
 use nalgebra::{Vector3, Vector4};
 use serde::Serialize;
@@ -149,33 +147,12 @@ pub fn prediction_errors_with_rotor_gains<M: HamiltonianModel>(
         .iter()
         .map(|d| rotor_scaling(&d.map(|x| 1.0 + x)))
         .collect();
-    let dt = 1.0 / data.sample_hz;
-    let n = data.window_len - 1;
-    let mut acc = vec![[0f64; 4]; n];
-    for &i in ids {
-        let w = &data.windows[i];
-        let aj = a
-            .and_then(|a| a.get(w.realization).copied())
-            .unwrap_or([0.0; FEATURES]);
-        let mut s = w.states[0];
-        for (k, acc) in acc.iter_mut().enumerate() {
-            let u = Vector4::from(w.u[k]);
-            let u = scalings.get(w.realization).map_or(u, |m| m * u);
-            s = rk4_step(model, &s, &u, &aj, dt);
-            let t = &w.states[k + 1];
-            acc[0] += f64::from((s.p_m - t.p_m).norm_squared());
-            acc[1] += f64::from(lie::geodesic_distance(&t.rot, &s.rot)).powi(2);
-            acc[2] += f64::from((s.v_body_m_s - t.v_body_m_s).norm_squared());
-            acc[3] += f64::from((s.w_body_rad_s - t.w_body_rad_s).norm_squared());
-        }
-    }
-    let m = ids.len().max(1) as f64;
-    let col = |c: usize| acc.iter().map(|a| (a[c] / m).sqrt()).collect();
+    let e = super::predict::rollout_errors(model, data, ids, a, &scalings);
     PredictionErrors {
-        pos_m: col(0),
-        rot_rad: col(1),
-        vel_m_s: col(2),
-        rate_rad_s: col(3),
+        pos_m: e.pos_rmse_m,
+        rot_rad: e.att_rmse_rad,
+        vel_m_s: e.vel_body_rmse_m_s,
+        rate_rad_s: e.rate_rmse_rad_s,
     }
 }
 

@@ -35,6 +35,7 @@ pub mod export;
 pub mod fused;
 #[path = "loop.rs"]
 pub mod r#loop;
+pub mod predict;
 pub mod tensor_model;
 
 use anyhow::{bail, Result};
