@@ -530,12 +530,7 @@ impl Adaptation {
     }
 
     #[cfg(feature = "composite")]
-    fn kalman(
-        &mut self,
-        g: &CompositeGains,
-        a_max: f32,
-        q_dt_s: f32,
-    ) -> Option<Vector6<f32>> {
+    fn kalman(&mut self, g: &CompositeGains, a_max: f32, q_dt_s: f32) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a full symmetric 6×6 matrix, updated in place (no copy of its
         // 36 entries in and out); the updates below work on its upper triangle and mirror it,
         // so it stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).

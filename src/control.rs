@@ -139,23 +139,32 @@ pub const ACCEL_DELAY_S: f32 = 0.0095;
 /// second). The prediction term is a disturbance observer on the torque rows: its bandwidth,
 /// about √(q h² / (r dt)), adds loop gain and lag at the attitude crossover. Measured with the
 /// chain and a 70 ms lag (docs/crazyflie-chain.md): the earlier tuning (Q = 1, the tracking
-/// term's full torque rates, a 10 ms low-pass on both sides, no sensor lag in the prediction)
-/// left the attitude loop 35°; the tracking term's torque rates took 8° of it, the low-pass
-/// 4°, the unmodelled gyro delay 2°. With those changes ([`COMPOSITE_TORQUE_RATE_SCALE`],
-/// [`COMPOSITE_GYRO_LAG_S`], no low-pass) Q = 0.8 leaves 45.4°.
-pub const COMPOSITE_Q_TORQUE: f32 = 0.8;
+/// term's torque rates, a 10 ms low-pass on both sides, no sensor lag in the prediction) left
+/// the attitude loop 35°: the observer took 13°, the tracking term's torque rates 8°. With
+/// [`COMPOSITE_TORQUE_RATE_SCALE`], [`COMPOSITE_GYRO_LAG_S`] and
+/// [`COMPOSITE_TORQUE_FILTER_S`], Q = 0.5 leaves 45.3°. The cost is a slower answer to a torque
+/// step: rotor-loss-mid recovers in 1.26 s instead of 0.73 s (the gradient law: 2.88 s).
+pub const COMPOSITE_Q_TORQUE: f32 = 0.5;
 
 /// The share of the (already scaled) torque rates c_R, c_ω the composite law's tracking term
 /// keeps under [`Gains::for_vehicle`]: none. The prediction term answers torque disturbances
-/// faster per degree of phase margin than the tracking term does (rotor-loss-mid recovers in
-/// 0.75 s either way, and the tracking term's rates cost 8°).
+/// faster per degree of phase margin than the tracking term does.
 pub const COMPOSITE_TORQUE_RATE_SCALE: f32 = 0.0;
 
-/// The lag (s) of the composite law's torque prediction behind the motors: the gyro's 2-pole
+/// The lag (s) of the composite law's torque prediction behind the motors. The gyro's 2-pole
 /// 80 Hz low-pass (2.8 ms), one sample of delay (1 ms), half a 500 Hz tick of hold (1 ms) and
-/// the half tick of the rate difference (1 ms) make 5.8 ms; the phase margin grows with it
-/// (41.6° with none, 44.1° at 6 ms, 45.4° at 8 ms, 46.9° at 11 ms), and 8 ms is chosen.
-pub const COMPOSITE_GYRO_LAG_S: f32 = 0.008;
+/// the half tick of the rate difference (1 ms) make 5.8 ms; the margin keeps growing past it
+/// (with Q = 0.8 and no low-pass: 41.6° with none, 44.1° at 6 ms, 45.4° at 8 ms, 46.9° at
+/// 11 ms: the prediction's excess lag feeds a share of the command's rate into ε, a lead in
+/// the observer's loop). 11 ms is chosen.
+pub const COMPOSITE_GYRO_LAG_S: f32 = 0.011;
+
+/// The composite law's low-pass on its torque rows under [`Gains::for_vehicle`] (s). Each ms
+/// of it costs the attitude loop about 0.4° of margin, but without it a badly trained model
+/// (2 epochs on 8 s of hover) saturates the mixer on 90 % of ticks and crashes on hover-wind:
+/// the model's error closes a loop through the unfiltered observer near the Nyquist rate.
+/// 3 ms and 5 ms both fly it (0.32 % and 0.20 % saturated).
+pub const COMPOSITE_TORQUE_FILTER_S: f32 = 0.005;
 
 /// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
 /// position loop (4 rad/s), fast against a changing wind; measured flat from 0.1 to 1 s.
@@ -268,9 +277,7 @@ impl Gains {
         g.rates.c_r *= TORQUE_ADAPTATION_SCALE;
         g.rates.c_w *= TORQUE_ADAPTATION_SCALE;
         g.composite.gyro_lag_s = COMPOSITE_GYRO_LAG_S;
-        // The IMU's own filters smooth the differences; a further low-pass is lag in the
-        // observer's loop (4° of the attitude margin at 10 ms).
-        g.composite.torque_filter_tau_s = 0.0;
+        g.composite.torque_filter_tau_s = COMPOSITE_TORQUE_FILTER_S;
         g.composite.accel_lag_s = ACCEL_DELAY_S;
         g.composite.q_torque = COMPOSITE_Q_TORQUE;
         g.composite.torque_rate_scale = COMPOSITE_TORQUE_RATE_SCALE;

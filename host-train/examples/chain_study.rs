@@ -51,8 +51,18 @@ impl Overrides {
     }
 }
 
+/// `--weights PATH`: the blob the learned controllers fly (default: the shipped one).
+static WEIGHTS: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+fn weights() -> PathBuf {
+    WEIGHTS
+        .get()
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from(registry::DEFAULT_WEIGHTS))
+}
+
 fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Box<dyn Controller> {
-    if o.0.is_empty() && facts_tau.is_none() {
+    if o.0.is_empty() && facts_tau.is_none() && WEIGHTS.get().is_none() {
         return registry::by_name(name, sc, None).expect("controller");
     }
     let law = if name.ends_with("-composite") {
@@ -72,8 +82,7 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
         g
     };
     if name.starts_with("adaptive") || name == "learned" {
-        let m =
-            adapter::load_learned(std::path::Path::new(registry::DEFAULT_WEIGHTS)).expect("blob");
+        let m = adapter::load_learned(&weights()).expect("blob");
         let g = mk(VehicleFacts::of(&m), name != "learned");
         Box::new(CoreController::new(name, m, g))
     } else if name.starts_with("geometric-adaptive") || name == "ida-pbc" {
@@ -116,6 +125,10 @@ fn main() -> anyhow::Result<()> {
             }
             "--lag-ms" => lag_ms = args.next().and_then(|s| s.parse().ok()),
             "--truth" => truth = true,
+            "--weights" => {
+                let w = args.next().map(PathBuf::from).expect("--weights PATH");
+                WEIGHTS.set(w).ok();
+            }
             "--trace" => trace = true,
             "--margins" => margins = true,
             "--facts-tau-ms" => {

@@ -263,7 +263,7 @@ fn law_selection_composite_tuning_and_diagnostics() {
     // SAFETY: as above.
     unsafe {
         hf_get_composite(&c, &mut t);
-        let d = hamflight::adapt::CompositeGains::default();
+        let d = hamflight::control::Gains::default().composite;
         assert_eq!(t, HfComposite::from_core(&d));
         for bad in [
             HfComposite { q_force: -1.0, ..t },
