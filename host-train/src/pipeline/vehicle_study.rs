@@ -406,8 +406,8 @@ fn last4(e: &train::export::PredictionErrors) -> [f64; 4] {
 }
 
 /// The logging controller: Lee on the vehicle's true mass and inertia, told its motor lag
-/// ([`Geometric::with_motor_lag`]: a lead for lags over 20 ms, so the light vehicle's 70 ms
-/// flies; the heavy vehicle's 20 ms flies Lee unchanged).
+/// ([`Geometric::with_motor_lag`]: a lead for lags over 30 ms, so the light vehicle's 70 ms
+/// flies; the heavy and asymmetric vehicles' 20 and 30 ms fly Lee unchanged).
 pub fn logging_controller(sc: &Scenario) -> Geometric {
     Geometric::with_motor_lag(sc.vehicle.clone(), sc.spec.effects.motor_tau_s)
 }
