@@ -15,7 +15,7 @@
 //! saturation ([`VehicleParams::wrench_to_rpm`]). The tilt of `b₃*` is limited to `max_tilt_rad`.
 //!
 //! [`Geometric::with_motor_lag`] adds a lead on the torques for motors slower than the gains
-//! were tuned behind ([`GEOMETRIC_LAG_TARGET_S`]), as the core's `LagCompensation` does: the
+//! fly behind ([`GEOMETRIC_MAX_UNCOMPENSATED_LAG_S`]), as the core's `LagCompensation` does: the
 //! gains stay Lee's, the motors look faster.
 
 use nalgebra::{Matrix3, Vector3};
@@ -61,7 +61,11 @@ impl GeometricGains {
 /// behind uncompensated: the heavy (20 ms) and asymmetric (30 ms) study vehicles' logging flights
 /// are Lee's own. At 70 ms (the light study vehicle) the attitude loop, crossing over near
 /// 80 rad/s, has no phase margin left and the vehicle rolls over within 2 s.
-pub const GEOMETRIC_LAG_TARGET_S: f64 = 0.03;
+pub const GEOMETRIC_MAX_UNCOMPENSATED_LAG_S: f64 = 0.03;
+
+/// The lag (s) [`Geometric::with_motor_lag`] makes slower motors look like: led to 30 ms, the
+/// light vehicle still crashes a logging flight (circle-calm at 0.80 s); to 20 ms all fly.
+pub const GEOMETRIC_LAG_TARGET_S: f64 = 0.02;
 
 /// The geometric controller.
 #[derive(Clone, Debug)]
@@ -89,12 +93,13 @@ impl Geometric {
     }
 
     /// [`Geometric::new`] for motors with first-order lag `motor_tau_s` (s): above
-    /// [`GEOMETRIC_LAG_TARGET_S`], the torque command is led from a model û of the delivered
-    /// wrench, τ_cmd = û + (τ_m / τ_t)(τ − û), so the attitude loop sees τ_t instead of τ_m;
-    /// at or below it (or non-finite), exactly [`Geometric::new`].
+    /// [`GEOMETRIC_MAX_UNCOMPENSATED_LAG_S`], the torque command is led from a model û of the
+    /// delivered wrench, τ_cmd = û + (τ_m / τ_t)(τ − û), so the attitude loop sees
+    /// τ_t = [`GEOMETRIC_LAG_TARGET_S`] instead of τ_m; at or below it (or non-finite), exactly
+    /// [`Geometric::new`].
     pub fn with_motor_lag(params: VehicleParams, motor_tau_s: f64) -> Self {
         let mut g = Self::new(params);
-        if motor_tau_s.is_finite() && motor_tau_s > GEOMETRIC_LAG_TARGET_S {
+        if motor_tau_s.is_finite() && motor_tau_s > GEOMETRIC_MAX_UNCOMPENSATED_LAG_S {
             g.lag = Some((motor_tau_s, GEOMETRIC_LAG_TARGET_S));
         }
         g
