@@ -1,8 +1,8 @@
 //! `host-train vehicle-study`: the evidence on a vehicle the nominal model does not know.
 //!
 //! 1. **Log.** Bitcraze's Lee-type geometric controller ([`logging_controller`], told the
-//!    vehicle's true mass and inertia, as Bitcraze's Lee is configured, and its motor lag) flies the vehicle of
-//!    `--vehicle` ([`VEHICLES`]: `heavy`, the default, 0.034 kg, inertia ×1.3, rotor 3 at 90 %,
+//!    vehicle's true mass and inertia, as Bitcraze's Lee is configured, and its motor lag)
+//!    flies the vehicle of `--vehicle` ([`VEHICLES`]: `heavy`, the default, 0.034 kg, inertia ×1.3, rotor 3 at 90 %,
 //!    20 ms motor lag; `light`, 0.030 kg, another inertia, 70 ms lag; `asym`, 0.031 kg, rotors 1
 //!    and 2 at 80 / 85 %, 30 ms lag; all with rotor drag and paper-spiral-realistic's state
 //!    noise; or a scenario file's `[vehicle]` and `[effects]`) through [`flight_plan`]: hover, circles and spirals, three in calm air and five under wind
