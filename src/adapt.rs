@@ -133,8 +133,12 @@ pub enum AdaptationLaw {
 /// Tuning of the composite law's prediction-error term (units: a's, see [`TORQUE_UNIT_NM`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CompositeGains {
-    /// Time constant of the low-pass on the measured force and on W (s).
+    /// Time constant of the low-pass on the measured force and on W, force rows (s).
     pub filter_tau_s: f32,
+    /// The same for the torque rows (s). The low-pass is lag in the observer's loop around the
+    /// attitude crossover (4° of its phase margin at 10 ms with the Crazyflie's chain), where
+    /// the gyro's own filter already smooths the rate differences.
+    pub torque_filter_tau_s: f32,
     /// Measurement variance R of the force rows, per sample ((m/s²)²).
     pub r_force: f32,
     /// Measurement variance R of the torque rows, per sample ((1e-3 N·m)²).
@@ -159,12 +163,28 @@ pub struct CompositeGains {
     /// lag at all still flies 0.047 cm; the cost is a slower answer to a rotor fault
     /// (rotor-loss-mid peak 1.2 → 2.3 cm).
     pub motor_tau_s: f32,
+    /// How far the measurement lags the wrench that caused it besides the motors (s): the
+    /// sensor's low-pass and the samples of delay in front of the law. The predicted thrust
+    /// passes a further first-order lag of `accel_lag_s` (the accelerometer's, for the force
+    /// rows), the predicted torques one of `gyro_lag_s` (the gyro's, for the torque rows), so
+    /// the prediction is delayed as the measurement is. Without it the delay's share of every
+    /// torque command (≈ ω τ of it at frequency ω) reads as a disturbance near the attitude
+    /// crossover, and the estimate closes a loop there that eats the attitude loop's phase
+    /// margin. 0 turns a stage off.
+    pub accel_lag_s: f32,
+    /// See [`CompositeGains::accel_lag_s`].
+    pub gyro_lag_s: f32,
+    /// The share of the tracking term's torque rates c_R, c_ω that runs beside the prediction
+    /// term. Both close a loop around the attitude crossover and take its phase margin
+    /// ([`crate::control::Gains::for_vehicle`] splits the budget between them).
+    pub torque_rate_scale: f32,
 }
 
 impl Default for CompositeGains {
     fn default() -> Self {
         Self {
             filter_tau_s: 0.01,
+            torque_filter_tau_s: 0.01,
             r_force: 1.0,
             r_torque: 1.0,
             q_force: 1.0,
@@ -173,6 +193,9 @@ impl Default for CompositeGains {
             p_max: 100.0,
             feedforward_tau_s: 0.02,
             motor_tau_s: 0.05,
+            accel_lag_s: 0.0,
+            gyro_lag_s: 0.0,
+            torque_rate_scale: 1.0,
         }
     }
 }
@@ -232,6 +255,8 @@ struct PredictionState {
     prev_u: Vector4<f32>,
     /// The delivered wrench through the assumed motor lag.
     u_lag: Vector4<f32>,
+    /// `u_lag` through the measurement's lag (`accel_lag_s`, `gyro_lag_s`).
+    u_sensed: Vector4<f32>,
     /// Whether `u_lag` holds a value.
     has_lag: bool,
     /// Whether `prev_*` hold a tick (false after a reset or a fault).
@@ -332,25 +357,33 @@ impl Adaptation {
             (lin * weight, ang * weight)
         };
         let (lin, ang) = if rates.normalized {
-            // ‖W̃‖²_F of W in nominal units (force rows / m, torque rows / τ): FEATURES for
-            // the nominal features at hover. One pass over the columns (column-major storage:
-            // rows 0–2 of a column are force, 3–5 torque).
-            let (mut force, mut torque) = (0.0f32, 0.0f32);
-            for &[f0, f1, f2, t0, t1, t2] in &features.data.0 {
-                force += f0 * f0 + f1 * f1 + f2 * f2;
-                torque += t0 * t0 + t1 * t1 + t2 * t2;
-            }
-            const INV_TAU2: f32 = 1.0 / (NOMINAL_TORQUE_FEATURE_NM * NOMINAL_TORQUE_FEATURE_NM);
-            let k = normalization(
-                force / (mass_kg * mass_kg) + torque * INV_TAU2,
-                FEATURES as f32,
-            );
+            let k = Self::feature_normalization(features, mass_kg);
             (lin * k, ang * k)
         } else {
             (lin, ang)
         };
         let s = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
         features.transpose() * s
+    }
+
+    /// The normalized gradient's factor min(1, h p / ‖W̃‖²_F) ([`AdaptationRates::normalized`]):
+    /// ‖W̃‖²_F of W in nominal units (force rows / m, torque rows / τ) is FEATURES for the
+    /// nominal features at hover. The composite law scales its process noise Q by it too, so
+    /// the observer's bandwidth (∝ ‖W‖ √Q) stays what it was designed for whatever the scale of
+    /// a trained model's features.
+    pub fn feature_normalization(features: &SMatrix<f32, 6, FEATURES>, mass_kg: f32) -> f32 {
+        // One pass over the columns (column-major storage: rows 0–2 of a column are force,
+        // 3–5 torque).
+        let (mut force, mut torque) = (0.0f32, 0.0f32);
+        for &[f0, f1, f2, t0, t1, t2] in &features.data.0 {
+            force += f0 * f0 + f1 * f1 + f2 * f2;
+            torque += t0 * t0 + t1 * t1 + t2 * t2;
+        }
+        const INV_TAU2: f32 = 1.0 / (NOMINAL_TORQUE_FEATURE_NM * NOMINAL_TORQUE_FEATURE_NM);
+        normalization(
+            force / (mass_kg * mass_kg) + torque * INV_TAU2,
+            FEATURES as f32,
+        )
     }
 
     /// One explicit-Euler step of the gradient law a ← Proj(a + dt ȧ). A non-finite update is
@@ -415,11 +448,20 @@ impl Adaptation {
         let m = x.mass_kg;
         let u = if self.pred.has_lag {
             let beta = dt_s / (gains.motor_tau_s.max(0.0) + dt_s);
-            self.pred.u_lag + (u - self.pred.u_lag) * beta
+            let lagged = self.pred.u_lag + (u - self.pred.u_lag) * beta;
+            self.pred.u_lag = lagged;
+            // The measurement's own lag: thrust as the accelerometer sees it, torques as the
+            // gyro does.
+            let bf = dt_s / (gains.accel_lag_s.max(0.0) + dt_s);
+            let bt = dt_s / (gains.gyro_lag_s.max(0.0) + dt_s);
+            let d = lagged - self.pred.u_sensed;
+            self.pred.u_sensed += Vector4::new(d.x * bf, d.y * bt, d.z * bt, d.w * bt);
+            self.pred.u_sensed
         } else {
+            self.pred.u_lag = u;
+            self.pred.u_sensed = u;
             u
         };
-        self.pred.u_lag = u;
         self.pred.has_lag = true;
         let gu = x.gain * u;
         let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
@@ -450,23 +492,34 @@ impl Adaptation {
         // which gives h_f = s W exactly. A non-finite feature shows as a non-finite sᵢ in the
         // Kalman update, a non-finite z as a non-finite a after it: either drops the update and
         // zeroes the filters for a fresh start.
-        let alpha = if self.pred.has_filter {
-            dt_s / (gains.filter_tau_s.max(0.0) + dt_s)
+        let (alpha_f, alpha_t) = if self.pred.has_filter {
+            (
+                dt_s / (gains.filter_tau_s.max(0.0) + dt_s),
+                dt_s / (gains.torque_filter_tau_s.max(0.0) + dt_s),
+            )
         } else {
-            1.0
+            (1.0, 1.0)
         };
-        let scale = [sf, sf, sf, st, st, st];
-        for (r, (hr, sc)) in self.pred.h_f.iter_mut().zip(scale.iter()).enumerate() {
+        let scale = [
+            (sf, alpha_f),
+            (sf, alpha_f),
+            (sf, alpha_f),
+            (st, alpha_t),
+            (st, alpha_t),
+            (st, alpha_t),
+        ];
+        for (r, (hr, (sc, alpha))) in self.pred.h_f.iter_mut().zip(scale.iter()).enumerate() {
             for (c, h) in hr.iter_mut().enumerate() {
                 let target = x.features.get((r, c)).copied().unwrap_or(0.0) * sc;
                 *h += (target - *h) * alpha;
             }
         }
-        for (zf, zi) in self.pred.z_f.iter_mut().zip(z.iter()) {
+        for ((zf, zi), (_, alpha)) in self.pred.z_f.iter_mut().zip(z.iter()).zip(scale.iter()) {
             *zf += (zi - *zf) * alpha;
         }
         self.pred.has_filter = true;
-        let out = self.kalman(gains, a_max, dt_s);
+        let q_scale = Self::feature_normalization(x.features, m);
+        let out = self.kalman(gains, a_max, dt_s * q_scale);
         if out.is_none() {
             // A non-finite feature reached the filter: start it again at the next sample.
             self.pred.has_filter = false;
@@ -477,7 +530,12 @@ impl Adaptation {
     }
 
     #[cfg(feature = "composite")]
-    fn kalman(&mut self, g: &CompositeGains, a_max: f32, dt_s: f32) -> Option<Vector6<f32>> {
+    fn kalman(
+        &mut self,
+        g: &CompositeGains,
+        a_max: f32,
+        q_dt_s: f32,
+    ) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a full symmetric 6×6 matrix, updated in place (no copy of its
         // 36 entries in and out); the updates below work on its upper triangle and mirror it,
         // so it stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).
@@ -493,7 +551,8 @@ impl Adaptation {
             restart_covariance(p, g.p0);
         }
         // Predict: a random walk, P ← P + Q dt (Q diagonal: force columns, then torque).
-        let (qf, qt) = (g.q_force * dt_s, g.q_torque * dt_s);
+        // (`q_dt_s` is dt scaled by the features' normalization.)
+        let (qf, qt) = (g.q_force * q_dt_s, g.q_torque * q_dt_s);
         for (i, col) in p.iter_mut().enumerate() {
             if let Some(d) = col.get_mut(i) {
                 *d += if i < 3 { qf } else { qt };

@@ -129,6 +129,34 @@ pub const LAG_TARGET_S: f32 = 0.006;
 /// controller (1 ms) and half a 500 Hz tick of hold (1 ms).
 pub const SENSOR_DELAY_S: f32 = 0.005;
 
+/// The accelerometer's delay in front of the law (s): its 2-pole 30 Hz low-pass (≈ 7.5 ms),
+/// one sample between estimate and controller and half a tick of hold. The composite law's
+/// prediction of the force rows is delayed by it ([`CompositeGains::accel_lag_s`]), as the
+/// torque rows' is by [`SENSOR_DELAY_S`].
+pub const ACCEL_DELAY_S: f32 = 0.0095;
+
+/// The composite law's torque process noise Q under [`Gains::for_vehicle`] ((1e-3 N·m)² per
+/// second). The prediction term is a disturbance observer on the torque rows: its bandwidth,
+/// about √(q h² / (r dt)), adds loop gain and lag at the attitude crossover. Measured with the
+/// chain and a 70 ms lag (docs/crazyflie-chain.md): the earlier tuning (Q = 1, the tracking
+/// term's full torque rates, a 10 ms low-pass on both sides, no sensor lag in the prediction)
+/// left the attitude loop 35°; the tracking term's torque rates took 8° of it, the low-pass
+/// 4°, the unmodelled gyro delay 2°. With those changes ([`COMPOSITE_TORQUE_RATE_SCALE`],
+/// [`COMPOSITE_GYRO_LAG_S`], no low-pass) Q = 0.8 leaves 45.4°.
+pub const COMPOSITE_Q_TORQUE: f32 = 0.8;
+
+/// The share of the (already scaled) torque rates c_R, c_ω the composite law's tracking term
+/// keeps under [`Gains::for_vehicle`]: none. The prediction term answers torque disturbances
+/// faster per degree of phase margin than the tracking term does (rotor-loss-mid recovers in
+/// 0.75 s either way, and the tracking term's rates cost 8°).
+pub const COMPOSITE_TORQUE_RATE_SCALE: f32 = 0.0;
+
+/// The lag (s) of the composite law's torque prediction behind the motors: the gyro's 2-pole
+/// 80 Hz low-pass (2.8 ms), one sample of delay (1 ms), half a 500 Hz tick of hold (1 ms) and
+/// the half tick of the rate difference (1 ms) make 5.8 ms; the phase margin grows with it
+/// (41.6° with none, 44.1° at 6 ms, 45.4° at 8 ms, 46.9° at 11 ms), and 8 ms is chosen.
+pub const COMPOSITE_GYRO_LAG_S: f32 = 0.008;
+
 /// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
 /// position loop (4 rad/s), fast against a changing wind; measured flat from 0.1 to 1 s.
 pub const VELOCITY_CONSISTENCY_TAU_S: f32 = 0.3;
@@ -239,6 +267,13 @@ impl Gains {
         }
         g.rates.c_r *= TORQUE_ADAPTATION_SCALE;
         g.rates.c_w *= TORQUE_ADAPTATION_SCALE;
+        g.composite.gyro_lag_s = COMPOSITE_GYRO_LAG_S;
+        // The IMU's own filters smooth the differences; a further low-pass is lag in the
+        // observer's loop (4° of the attitude margin at 10 ms).
+        g.composite.torque_filter_tau_s = 0.0;
+        g.composite.accel_lag_s = ACCEL_DELAY_S;
+        g.composite.q_torque = COMPOSITE_Q_TORQUE;
+        g.composite.torque_rate_scale = COMPOSITE_TORQUE_RATE_SCALE;
         g
     }
 
@@ -661,8 +696,20 @@ impl<M: HamiltonianModel> FlightController<M> {
                     .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
             }
             if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
-                self.adaptation
-                    .step(&g.rates, &t.features, &errors, m, dt_s);
+                #[cfg(feature = "composite")]
+                let rates = if g.law == AdaptationLaw::Composite {
+                    let k = g.composite.torque_rate_scale;
+                    AdaptationRates {
+                        c_r: g.rates.c_r * k,
+                        c_w: g.rates.c_w * k,
+                        ..g.rates
+                    }
+                } else {
+                    g.rates
+                };
+                #[cfg(not(feature = "composite"))]
+                let rates = g.rates;
+                self.adaptation.step(&rates, &t.features, &errors, m, dt_s);
             }
             #[cfg(feature = "composite")]
             self.adaptation.record_input(&delivered);

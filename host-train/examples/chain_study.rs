@@ -36,6 +36,11 @@ impl Overrides {
                 "c_r" => g.rates.c_r = *v,
                 "c_w" => g.rates.c_w = *v,
                 "q_t" => g.composite.q_torque = *v,
+                "accel_lag" => g.composite.accel_lag_s = *v,
+                "gyro_lag" => g.composite.gyro_lag_s = *v,
+                "trs" => g.composite.torque_rate_scale = *v,
+                "filter_tau" => g.composite.torque_filter_tau_s = *v,
+                "r_t" => g.composite.r_torque = *v,
                 "q" => {
                     g.composite.q_force = *v;
                     g.composite.q_torque = *v
@@ -166,7 +171,7 @@ fn main() -> anyhow::Result<()> {
                         "margins {} {c} {point:?}: crossover {:?} Hz PM {:?} GM {:?} dB",
                         sc.name,
                         m.crossover_hz.map(|x| (x * 100.0).round() / 100.0),
-                        m.phase_margin_deg.map(|x| x.round()),
+                        m.phase_margin_deg.map(|x| (x * 10.0).round() / 10.0),
                         m.gain_margin_db.map(|x| (x * 10.0).round() / 10.0)
                     );
                 }
@@ -174,6 +179,16 @@ fn main() -> anyhow::Result<()> {
             }
             let log = eval::fly(&sc, ctrl.as_mut());
             let r = Report::from_flight(&log, &sc, None);
+            for e in &r.events {
+                println!(
+                    "event {} {c} t {:.1} s: peak {:.2} cm, recovery {:?} s, RMSE after {:?} cm",
+                    sc.name,
+                    e.t_s,
+                    100.0 * e.peak_err_m,
+                    e.recovery_s.map(|x| (x * 100.0).round() / 100.0),
+                    e.rmse_after_m.map(|x| (x * 1e4).round() / 100.0)
+                );
+            }
             if trace {
                 for (i, t) in log.t_s.iter().enumerate().step_by(100) {
                     let a = log.adaptation.get(i).cloned().unwrap_or_default();

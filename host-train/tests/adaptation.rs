@@ -56,12 +56,14 @@ fn rotor_loss_mid_recovers_within_a_second() {
     let g = fly("adaptive-gradient", &sc);
     let (ce, ge) = (event(&c, 0), event(&g, 0));
     assert_eq!(ce.t_s, 12.0);
-    // measured: composite peak 2.26 cm, recovery 0.73 s, RMSE 12–17 s 0.64 cm;
-    // gradient 6.56 cm, 2.57 s, 2.47 cm. Bars: recovery ≤ 1 s, peak ≤ 50 % of the gradient's.
+    // measured: composite peak 4.24 cm, recovery 0.75 s, RMSE 12–17 s 1.07 cm (2.26 cm,
+    // 0.73 s, 0.64 cm before the torque observer gave the attitude loop its 45° with the
+    // Crazyflie's chain); gradient 10.75 cm, 2.88 s, 3.45 cm. Bars: recovery ≤ 1 s, peak ≤ 50 %
+    // of the gradient's.
     let rec = ce.recovery_s.expect("composite recovers");
     assert!(rec <= 1.0, "recovery {rec} s");
     assert!(ce.peak_err_m <= 0.5 * ge.peak_err_m, "{ce:?} vs {ge:?}");
-    assert!(ce.rmse_after_m.expect("scored") <= 0.0095, "{ce:?}");
+    assert!(ce.rmse_after_m.expect("scored") <= 0.016, "{ce:?}");
     assert!(ge.recovery_s.is_none_or(|r| r > 2.0), "gradient {ge:?}");
 }
 
@@ -156,14 +158,15 @@ fn composite_estimate_is_calm_under_noise() {
     let (c, g) = (&stds[0], &stds[1]);
     println!("a std, composite {c:.4?}\na std, gradient  {g:.4?}");
     let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
-    // measured: composite force columns ≤ 0.056 m/s², torque ≤ 0.0042 (1e-3 N·m);
-    // gradient 0.048 and 0.0033. Thresholds 1.5× the composite's.
+    // measured: composite force columns ≤ 0.052 m/s², torque ≤ 0.0089 (1e-3 N·m; 0.0042
+    // with the 10 ms low-pass the torque rows no longer have, which cost the attitude loop 4°
+    // of phase margin); gradient 0.048 and 0.0033. Thresholds 1.5× the composite's.
     assert!(max(&c[..3]) <= CALM_FORCE, "force std {c:?}");
     assert!(max(&c[3..]) <= CALM_TORQUE, "torque std {c:?}");
 }
 
 const CALM_FORCE: f64 = 0.084;
-const CALM_TORQUE: f64 = 0.0063;
+const CALM_TORQUE: f64 = 0.0135;
 
 /// A model whose features are wrong on purpose: scaled, or with a constant bias added.
 #[derive(Clone, Copy)]
@@ -252,11 +255,12 @@ fn composite_without_an_accelerometer() {
         let log = eval::fly(&sc, &mut c);
         let r = Report::from_flight(&log, &sc, None);
         assert!(!r.crashed, "{name}: {r:?}");
-        // measured: paper-spiral 0.020 cm; rotor-loss-mid 0.37 cm.
+        // measured: paper-spiral 0.020 cm; rotor-loss-mid 0.63 cm (0.37 cm before the torque
+        // observer was slowed for the attitude loop's margin).
         let bar = if name == "paper-spiral" {
             0.0003
         } else {
-            0.0055
+            0.0095
         };
         assert!(window(&r) <= bar, "{name}: {:.6} m", window(&r));
     }
