@@ -9,6 +9,8 @@
 //! - `g: no x/y force`: the g head's body x and y force rows zeroed (no input makes them);
 //! - `g: no torque→force`: the torque columns of the three force rows zeroed;
 //! - `g: thrust along z only`: both (the force rows take only thrust, along body z);
+//! - `J := true`: the J⁻¹ head replaced by the first scenario's true (constant, diagonal) J;
+//! - `J := true, g torque rows := true`: also g's torque rows set to the identity pattern;
 //! - `nominal, true m and J`: the nominal model told the true mass and inertia (the prediction's
 //!   row scaling for a non-stock vehicle, with an exact g).
 //!
@@ -30,6 +32,31 @@ fn zero_gain_outputs(w: &ModelWeights, keep: impl Fn(usize, usize) -> bool) -> M
             out.gain.l2.weight[n] = [0.0; hamflight::model::HIDDEN];
             out.gain.l2.bias[n] = 0.0;
         }
+    }
+    out
+}
+
+/// `w` with the J⁻¹ head constant at the diagonal inertia `j` (kg·m²).
+fn with_inertia(w: &ModelWeights, j: &Vector3<f32>) -> ModelWeights {
+    let mut out = *w;
+    out.inertia.l2.weight = [[0.0; hamflight::model::HIDDEN]; hamflight::model::JINV_OUT];
+    out.inertia.l2.bias = hamflight::model::learned::l_for_diagonal_inertia(j);
+    out
+}
+
+/// `w` with g's torque rows (3..6) constant at the true pattern.
+fn with_true_torque_rows(w: &ModelWeights) -> ModelWeights {
+    let mut out = *w;
+    let t = hamflight::model::learned::true_gain_output();
+    let rows = out
+        .gain
+        .l2
+        .weight
+        .iter_mut()
+        .zip(out.gain.l2.bias.iter_mut());
+    for ((w, b), t) in rows.zip(t).skip(12) {
+        *w = [0.0; hamflight::model::HIDDEN];
+        *b = t;
     }
     out
 }
@@ -78,8 +105,19 @@ fn main() -> anyhow::Result<()> {
         law: AdaptationLaw::Composite,
         ..Gains::for_vehicle(&VehicleFacts::of(m))
     };
+    let j_true = match scenarios.first() {
+        Some(s) => Vector3::from(Scenario::load(s)?.vehicle.inertia_kg_m2.map(|x| x as f32)),
+        None => Vector3::new(1.4e-5, 1.4e-5, 2.17e-5),
+    };
+    let tau = model.motor_tau_s();
+    let relag = |w: ModelWeights| LearnedModel::new(w).with_motor_tau_s(tau);
     let variants: Vec<(&str, LearnedModel)> = vec![
         ("as trained", model),
+        ("J := true", relag(with_inertia(&w, &j_true))),
+        (
+            "J := true, g torque rows := true",
+            relag(with_true_torque_rows(&with_inertia(&w, &j_true))),
+        ),
         (
             "g: no x/y force",
             LearnedModel::new(zero_gain_outputs(&w, |i, _| i >= 2)),

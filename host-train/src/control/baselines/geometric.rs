@@ -13,6 +13,10 @@
 //! and the acceleration the nominal model predicts); `ω̇*` is a finite difference of `ω*` between
 //! ticks. The wrench goes to the rotors through the nominal mixer inverse with attitude-preserving
 //! saturation ([`VehicleParams::wrench_to_rpm`]). The tilt of `b₃*` is limited to `max_tilt_rad`.
+//!
+//! [`Geometric::with_motor_lag`] adds a lead on the torques for motors slower than the gains
+//! fly behind ([`GEOMETRIC_MAX_UNCOMPENSATED_LAG_S`]), as the core's `LagCompensation` does: the
+//! gains stay Lee's, the motors look faster.
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -53,6 +57,16 @@ impl GeometricGains {
     }
 }
 
+/// The longest first-order motor lag (s) the gains of [`GeometricGains::for_vehicle`] are flown
+/// behind uncompensated: the heavy (20 ms) and asymmetric (30 ms) study vehicles' logging flights
+/// are Lee's own. At 70 ms (the light study vehicle) the attitude loop, crossing over near
+/// 80 rad/s, has no phase margin left and the vehicle rolls over within 2 s.
+pub const GEOMETRIC_MAX_UNCOMPENSATED_LAG_S: f64 = 0.03;
+
+/// The lag (s) [`Geometric::with_motor_lag`] makes slower motors look like: led to 30 ms, the
+/// light vehicle still crashes a logging flight (circle-calm at 0.80 s); to 20 ms all fly.
+pub const GEOMETRIC_LAG_TARGET_S: f64 = 0.02;
+
 /// The geometric controller.
 #[derive(Clone, Debug)]
 pub struct Geometric {
@@ -60,6 +74,10 @@ pub struct Geometric {
     pub gains: GeometricGains,
     params: VehicleParams,
     last_wd: Option<(f64, Vector3<f64>)>,
+    /// Lag lead: (motor τ_m, target τ_t) in s, τ_m > τ_t; `None`: off.
+    lag: Option<(f64, f64)>,
+    /// The delivered wrench's first-order model (the lead's state).
+    u_model: Option<[f64; 4]>,
 }
 
 impl Geometric {
@@ -69,7 +87,22 @@ impl Geometric {
             gains: GeometricGains::for_vehicle(&params),
             params,
             last_wd: None,
+            lag: None,
+            u_model: None,
         }
+    }
+
+    /// [`Geometric::new`] for motors with first-order lag `motor_tau_s` (s): above
+    /// [`GEOMETRIC_MAX_UNCOMPENSATED_LAG_S`], the torque command is led from a model û of the
+    /// delivered wrench, τ_cmd = û + (τ_m / τ_t)(τ − û), so the attitude loop sees
+    /// τ_t = [`GEOMETRIC_LAG_TARGET_S`] instead of τ_m; at or below it (or non-finite), exactly
+    /// [`Geometric::new`].
+    pub fn with_motor_lag(params: VehicleParams, motor_tau_s: f64) -> Self {
+        let mut g = Self::new(params);
+        if motor_tau_s.is_finite() && motor_tau_s > GEOMETRIC_MAX_UNCOMPENSATED_LAG_S {
+            g.lag = Some((motor_tau_s, GEOMETRIC_LAG_TARGET_S));
+        }
+        g
     }
 
     /// Desired wrench `[f; τ]` (N, N·m) for one tick (also updates the ω* history).
@@ -142,10 +175,37 @@ impl Controller for Geometric {
 
     fn reset(&mut self) {
         self.last_wd = None;
+        self.u_model = None;
     }
 
-    fn step(&mut self, t_s: f64, s: &PlantState, r: &TrajectoryPoint, _dt: f64) -> [f64; 4] {
+    fn step(&mut self, t_s: f64, s: &PlantState, r: &TrajectoryPoint, dt: f64) -> [f64; 4] {
         let u = self.wrench(t_s, s, r);
-        self.params.wrench_to_rpm(u)
+        let Some((tau_m, tau_t)) = self.lag else {
+            return self.params.wrench_to_rpm(u);
+        };
+        // The torques only, as the core: a lead on the thrust would spend the thrust margin.
+        let ratio = tau_m / tau_t;
+        let cmd = match self.u_model {
+            Some(m) => [
+                u[0],
+                m[1] + ratio * (u[1] - m[1]),
+                m[2] + ratio * (u[2] - m[2]),
+                m[3] + ratio * (u[3] - m[3]),
+            ],
+            None => u,
+        };
+        let rpm = self.params.wrench_to_rpm(cmd);
+        let delivered = self.params.nominal_wrench(rpm);
+        let beta = if dt.is_finite() && dt > 0.0 {
+            dt / (tau_m + dt)
+        } else {
+            1.0
+        };
+        let next: [f64; 4] = match self.u_model {
+            Some(m) => core::array::from_fn(|i| m[i] + beta * (delivered[i] - m[i])),
+            None => delivered,
+        };
+        self.u_model = next.iter().all(|x| x.is_finite()).then_some(next);
+        rpm
     }
 }
