@@ -242,6 +242,8 @@ pub struct PredictionInput<'a> {
     pub w_body_rad_s: &'a Vector3<f32>,
     /// The platform's extra measurements.
     pub measurement: &'a Measurement,
+    /// [`Adaptation::feature_normalization`] of `features`: the process noise Q is scaled by it.
+    pub feature_scale: f32,
 }
 
 /// The composite law's memory between ticks.
@@ -277,8 +279,10 @@ struct PredictionState {
 pub struct Adaptation {
     /// The estimate a ∈ ℝᵖ.
     pub a: SVector<f32, FEATURES>,
-    /// The composite law's gain P (zero until its first update).
-    pub p: SMatrix<f32, FEATURES, FEATURES>,
+    /// The composite law's gain P (zero until its first update). Only its upper triangle is
+    /// kept up to date (the update reads and writes nothing else); [`Adaptation::covariance`]
+    /// gives the whole symmetric matrix.
+    p: SMatrix<f32, FEATURES, FEATURES>,
     pred: PredictionState,
 }
 
@@ -334,6 +338,25 @@ impl Adaptation {
         err: &TrackingError,
         mass_kg: f32,
     ) -> SVector<f32, FEATURES> {
+        let k = if rates.normalized {
+            Self::feature_normalization(features, mass_kg)
+        } else {
+            1.0
+        };
+        Self::rate_scaled(rates, features, err, k, 1.0)
+    }
+
+    /// [`Adaptation::rate`] with the normalization factor given (`scale`, applied when
+    /// `rates.normalized`), so a caller that needs it twice computes it once, and only
+    /// `torque_share` of the torque rates c_R, c_ω (the composite law's
+    /// [`CompositeGains::torque_rate_scale`]; 1 for the gradient law).
+    pub fn rate_scaled(
+        rates: &AdaptationRates,
+        features: &SMatrix<f32, 6, FEATURES>,
+        err: &TrackingError,
+        scale: f32,
+        torque_share: f32,
+    ) -> SVector<f32, FEATURES> {
         let lin = err.e_p * rates.c_p + err.e_v * rates.c_v;
         let ang = err.e_r * rates.c_r + err.e_w * rates.c_w;
         // The default (no soft freeze) gives weight 1 exactly; skip its norm and division.
@@ -356,12 +379,8 @@ impl Adaptation {
         } else {
             (lin * weight, ang * weight)
         };
-        let (lin, ang) = if rates.normalized {
-            let k = Self::feature_normalization(features, mass_kg);
-            (lin * k, ang * k)
-        } else {
-            (lin, ang)
-        };
+        let k = if rates.normalized { scale } else { 1.0 };
+        let (lin, ang) = (lin * k, ang * (k * torque_share));
         let s = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
         features.transpose() * s
     }
@@ -397,6 +416,20 @@ impl Adaptation {
         dt_s: f32,
     ) {
         let next = self.a + Self::rate(rates, features, err, mass_kg) * dt_s;
+        self.set_projected(next, rates.a_max);
+    }
+
+    /// [`Adaptation::step`] with the normalization factor and the torque rates' share given
+    /// (see [`Adaptation::rate_scaled`]).
+    pub fn step_scaled(
+        &mut self,
+        rates: &AdaptationRates,
+        features: &SMatrix<f32, 6, FEATURES>,
+        err: &TrackingError,
+        (scale, torque_share): (f32, f32),
+        dt_s: f32,
+    ) {
+        let next = self.a + Self::rate_scaled(rates, features, err, scale, torque_share) * dt_s;
         self.set_projected(next, rates.a_max);
     }
 
@@ -447,16 +480,21 @@ impl Adaptation {
         }
         let m = x.mass_kg;
         let u = if self.pred.has_lag {
-            let beta = dt_s / (gains.motor_tau_s.max(0.0) + dt_s);
+            let beta = lag_gain(gains.motor_tau_s, dt_s);
             let lagged = self.pred.u_lag + (u - self.pred.u_lag) * beta;
             self.pred.u_lag = lagged;
             // The measurement's own lag: thrust as the accelerometer sees it, torques as the
             // gyro does.
-            let bf = dt_s / (gains.accel_lag_s.max(0.0) + dt_s);
-            let bt = dt_s / (gains.gyro_lag_s.max(0.0) + dt_s);
-            let d = lagged - self.pred.u_sensed;
-            self.pred.u_sensed += Vector4::new(d.x * bf, d.y * bt, d.z * bt, d.w * bt);
-            self.pred.u_sensed
+            let (bf, bt) = (
+                lag_gain(gains.accel_lag_s, dt_s),
+                lag_gain(gains.gyro_lag_s, dt_s),
+            );
+            let us = &mut self.pred.u_sensed;
+            us.x += (lagged.x - us.x) * bf;
+            us.y += (lagged.y - us.y) * bt;
+            us.z += (lagged.z - us.z) * bt;
+            us.w += (lagged.w - us.w) * bt;
+            *us
         } else {
             self.pred.u_lag = u;
             self.pred.u_sensed = u;
@@ -494,32 +532,30 @@ impl Adaptation {
         // zeroes the filters for a fresh start.
         let (alpha_f, alpha_t) = if self.pred.has_filter {
             (
-                dt_s / (gains.filter_tau_s.max(0.0) + dt_s),
-                dt_s / (gains.torque_filter_tau_s.max(0.0) + dt_s),
+                lag_gain(gains.filter_tau_s, dt_s),
+                lag_gain(gains.torque_filter_tau_s, dt_s),
             )
         } else {
             (1.0, 1.0)
         };
-        let scale = [
-            (sf, alpha_f),
-            (sf, alpha_f),
-            (sf, alpha_f),
-            (st, alpha_t),
-            (st, alpha_t),
-            (st, alpha_t),
-        ];
-        for (r, (hr, (sc, alpha))) in self.pred.h_f.iter_mut().zip(scale.iter()).enumerate() {
-            for (c, h) in hr.iter_mut().enumerate() {
-                let target = x.features.get((r, c)).copied().unwrap_or(0.0) * sc;
-                *h += (target - *h) * alpha;
+        // Force rows (0–2) with the force rows' low-pass, torque rows (3–5) with theirs.
+        let (h_force, h_torque) = self.pred.h_f.split_at_mut(3);
+        let (z_force, z_torque) = self.pred.z_f.split_at_mut(3);
+        let (zi_force, zi_torque) = z.split_at(3);
+        for (row0, hs, zs, zis, sc, alpha) in [
+            (0, h_force, z_force, zi_force, sf, alpha_f),
+            (3, h_torque, z_torque, zi_torque, st, alpha_t),
+        ] {
+            for (r, (hr, (zf, zi))) in hs.iter_mut().zip(zs.iter_mut().zip(zis)).enumerate() {
+                for (c, h) in hr.iter_mut().enumerate() {
+                    let target = x.features.get((row0 + r, c)).copied().unwrap_or(0.0) * sc;
+                    *h += (target - *h) * alpha;
+                }
+                *zf += (zi - *zf) * alpha;
             }
         }
-        for ((zf, zi), (_, alpha)) in self.pred.z_f.iter_mut().zip(z.iter()).zip(scale.iter()) {
-            *zf += (zi - *zf) * alpha;
-        }
         self.pred.has_filter = true;
-        let q_scale = Self::feature_normalization(x.features, m);
-        let out = self.kalman(gains, a_max, dt_s * q_scale);
+        let out = self.kalman(gains, a_max, dt_s * x.feature_scale);
         if out.is_none() {
             // A non-finite feature reached the filter: start it again at the next sample.
             self.pred.has_filter = false;
@@ -531,9 +567,9 @@ impl Adaptation {
 
     #[cfg(feature = "composite")]
     fn kalman(&mut self, g: &CompositeGains, a_max: f32, q_dt_s: f32) -> Option<Vector6<f32>> {
-        // P lives in `self.p` as a full symmetric 6×6 matrix, updated in place (no copy of its
-        // 36 entries in and out); the updates below work on its upper triangle and mirror it,
-        // so it stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).
+        // P lives in `self.p` as a 6×6 matrix, updated in place (no copy of its 36 entries in
+        // and out); the updates below read and write its upper triangle only (the lower one is
+        // mirrored on demand by `covariance`), so P stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).
         // A P whose diagonal is not positive starts again here. A non-finite entry of the upper
         // triangle (the only part read) needs no pass of its own: it makes some s non-finite
         // below, which drops this tick's update and starts P again.
@@ -579,7 +615,6 @@ impl Adaptation {
             restart_covariance(p, g.p0);
             return None;
         }
-        mirror_upper(p);
         // Positive diagonal (rounding may lose definiteness: start the gain again), bounded
         // largest diagonal (scaling keeps P positive definite).
         let mut dmax = 0.0f32;
@@ -614,11 +649,36 @@ impl Adaptation {
         Some(Vector6::from(eps))
     }
 
+    /// The composite law's gain P, symmetric (its lower triangle mirrored from the upper one
+    /// the update keeps).
+    pub fn covariance(&self) -> SMatrix<f32, FEATURES, FEATURES> {
+        let mut p = self.p;
+        #[cfg(feature = "composite")]
+        mirror_upper(&mut p.data.0);
+        p
+    }
+
+    /// trace P (the composite law's gain; zero before its first update).
+    pub fn covariance_trace(&self) -> f32 {
+        self.p.trace()
+    }
+
     /// The composite law's prediction error ε = z_f − h_f a of its last update (a's units:
     /// force rows in m/s², torque rows in 1e-3 N·m), before that update moved a; `None` before
     /// the first update and after a reset.
     pub fn prediction_error(&self) -> Option<Vector6<f32>> {
         self.pred.eps.map(Vector6::from)
+    }
+}
+
+/// dt / (τ + dt): the step gain of a first-order lag τ (s); 1 (no lag) for τ ≤ 0 or NaN.
+#[cfg(feature = "composite")]
+#[inline(always)]
+fn lag_gain(tau_s: f32, dt_s: f32) -> f32 {
+    if tau_s > 0.0 {
+        dt_s / (tau_s + dt_s)
+    } else {
+        1.0
     }
 }
 

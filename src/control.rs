@@ -686,6 +686,8 @@ impl<M: HamiltonianModel> FlightController<M> {
         // so the estimate does not wind up on an unreachable demand. The composite law's
         // prediction term compares with the wrench actually delivered, so it keeps running.
         if g.adapt {
+            // The features' normalization, once for both terms.
+            let scale = Adaptation::feature_normalization(&t.features, m);
             #[cfg(feature = "composite")]
             if g.law == AdaptationLaw::Composite {
                 let x = PredictionInput {
@@ -698,25 +700,27 @@ impl<M: HamiltonianModel> FlightController<M> {
                     v_body_m_s: &state.v_body_m_s,
                     w_body_rad_s: w,
                     measurement: meas,
+                    feature_scale: scale,
                 };
                 self.adaptation
                     .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
             }
             if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
                 #[cfg(feature = "composite")]
-                let rates = if g.law == AdaptationLaw::Composite {
-                    let k = g.composite.torque_rate_scale;
-                    AdaptationRates {
-                        c_r: g.rates.c_r * k,
-                        c_w: g.rates.c_w * k,
-                        ..g.rates
-                    }
+                let torque_share = if g.law == AdaptationLaw::Composite {
+                    g.composite.torque_rate_scale
                 } else {
-                    g.rates
+                    1.0
                 };
                 #[cfg(not(feature = "composite"))]
-                let rates = g.rates;
-                self.adaptation.step(&rates, &t.features, &errors, m, dt_s);
+                let torque_share = 1.0;
+                self.adaptation.step_scaled(
+                    &g.rates,
+                    &t.features,
+                    &errors,
+                    (scale, torque_share),
+                    dt_s,
+                );
             }
             #[cfg(feature = "composite")]
             self.adaptation.record_input(&delivered);

@@ -69,6 +69,7 @@ impl Rig {
             v_body_m_s: &v,
             w_body_rad_s: &w,
             measurement: &meas,
+            feature_scale: Adaptation::feature_normalization(&self.features, 0.027),
         };
         ad.predict_step(g, 20.0, &x, DT_S);
         ad.record_input(u);
@@ -114,7 +115,7 @@ fn prediction_term_converges_to_the_true_weights() {
         .copy_from(&(torque_nm / TORQUE_UNIT_NM));
     let err = (ad.a - truth).norm() / truth.norm();
     assert!(err < 1e-3, "a = {} vs {truth} ({err})", ad.a);
-    assert_spd_bounded(&ad.p, g.p_max);
+    assert_spd_bounded(&ad.covariance(), g.p_max);
 }
 
 #[test]
@@ -135,8 +136,12 @@ fn gain_stays_bounded_without_excitation_and_bad_measurements_are_dropped() {
             Vector3::new(1.0, 0.0, 0.0),
         );
     }
-    assert_spd_bounded(&ad.p, g.p_max);
-    assert!(ad.p[(0, 0)] > 4.0, "P did not grow to its bound: {}", ad.p);
+    assert_spd_bounded(&ad.covariance(), g.p_max);
+    assert!(
+        ad.covariance()[(0, 0)] > 4.0,
+        "P did not grow to its bound: {}",
+        ad.covariance()
+    );
     assert_eq!(ad.a, SVector::<f32, FEATURES>::zeros());
 
     let rig = Rig::new(Matrix3::identity());
@@ -164,5 +169,5 @@ fn gain_stays_bounded_without_excitation_and_bad_measurements_are_dropped() {
         assert!(ad.a.iter().all(|x| x.is_finite()));
     }
     assert!(ad.a.norm() < 1e-2, "{}", ad.a);
-    assert_spd_bounded(&ad.p, g.p_max);
+    assert_spd_bounded(&ad.covariance(), g.p_max);
 }

@@ -314,7 +314,7 @@ pub unsafe extern "C" fn hf_get_prediction_error(
 #[no_mangle]
 pub unsafe extern "C" fn hf_p_trace(ctl: *const HfController) -> f32 {
     // SAFETY: the caller's contract.
-    unsafe { inner_ref(ctl) }.map_or(0.0, |i| i.ctl.adaptation().p.trace())
+    unsafe { inner_ref(ctl) }.map_or(0.0, |i| i.ctl.adaptation().covariance_trace())
 }
 
 /// `hf_set_adapt`: the adaptation law on or off (off freezes a).

@@ -253,7 +253,7 @@ fn law_selection_composite_tuning_and_diagnostics() {
         assert!(hf_get_prediction_error(&c, &mut eps));
         let e: [f32; 6] = native.adaptation().prediction_error().unwrap().into();
         assert_eq!(eps, e);
-        assert_eq!(hf_p_trace(&c), native.adaptation().p.trace());
+        assert_eq!(hf_p_trace(&c), native.adaptation().covariance_trace());
         assert!(hf_p_trace(&c) > 0.0);
     }
     assert_eq!(estimate(&c), <[f32; FEATURES]>::from(native.estimate()));
