@@ -652,7 +652,7 @@ fn c_path_matches_native_with(
     let p_trace_c = c.shim.log_f32("pTrace");
     let ad = native.inner().adaptation();
     let eps_native: [f32; 6] = ad.prediction_error().map_or([0.0; 6], Into::into);
-    let p_trace_native = ad.p.trace();
+    let p_trace_native = ad.covariance_trace();
     for (x, y) in eps_native.iter().zip(eps_c.iter()) {
         assert!(
             (x - y).abs() < 1e-3 * (1.0 + x.abs()),
