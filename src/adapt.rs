@@ -652,10 +652,17 @@ impl Adaptation {
     /// The composite law's gain P, symmetric (its lower triangle mirrored from the upper one
     /// the update keeps).
     pub fn covariance(&self) -> SMatrix<f32, FEATURES, FEATURES> {
-        let mut p = self.p;
         #[cfg(feature = "composite")]
-        mirror_upper(&mut p.data.0);
-        p
+        {
+            let mut p = self.p;
+            mirror_upper(&mut p.data.0);
+            p
+        }
+        // Without the composite law P is never updated (zero).
+        #[cfg(not(feature = "composite"))]
+        {
+            self.p
+        }
     }
 
     /// trace P (the composite law's gain; zero before its first update).
