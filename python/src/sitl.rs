@@ -128,7 +128,7 @@ fn scenario_arg(obj: &Bound<'_, PyAny>) -> PyResult<HostScenario> {
 /// What to fly: a name of the registry, or a copy of a Python controller.
 enum Pilot {
     Baseline(String),
-    Core(String, AnyModel, hamflight::Gains),
+    Core(String, AnyModel, Box<hamflight::Gains>),
 }
 
 /// One flight, without the GIL.
@@ -136,7 +136,7 @@ fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> 
     let mut ctrl: Box<dyn HostController> = match pilot {
         Pilot::Baseline(name) => host_train::control::registry::baseline_by_name(name, scenario)?,
         Pilot::Core(name, model, gains) => {
-            Box::new(CoreController::new(name, model.clone(), *gains))
+            Box::new(CoreController::new(name, model.clone(), **gains))
         }
     };
     Ok(eval::fly(scenario, ctrl.as_mut()))
@@ -235,14 +235,18 @@ pub fn fly(
     let controller = controller.unwrap_or(&default);
     let pilot = if let Ok(c) = controller.cast::<Controller>() {
         let c = c.borrow();
-        Pilot::Core(c.name.clone(), c.inner.model().clone(), c.inner.gains)
+        Pilot::Core(
+            c.name.clone(),
+            c.inner.model().clone(),
+            Box::new(c.inner.gains),
+        )
     } else {
         let name: String = controller.extract().map_err(|_| {
             PyTypeError::new_err("controller: expected a name or a hamflight.Controller")
         })?;
         if core_names().contains(&name.as_str()) {
             let (model, gains) = named(&name, weights)?;
-            Pilot::Core(name, model, gains)
+            Pilot::Core(name, model, Box::new(gains))
         } else {
             Pilot::Baseline(name)
         }
