@@ -330,27 +330,12 @@ impl Adaptation {
         self.pred.has_prev = false;
     }
 
-    /// ȧ of the gradient law for the given features and errors, with the robust clipping and
-    /// the normalization ([`AdaptationRates::normalized`]) for a vehicle of `mass_kg`.
-    pub fn rate(
-        rates: &AdaptationRates,
-        features: &SMatrix<f32, 6, FEATURES>,
-        err: &TrackingError,
-        mass_kg: f32,
-    ) -> SVector<f32, FEATURES> {
-        let k = if rates.normalized {
-            Self::feature_normalization(features, mass_kg)
-        } else {
-            1.0
-        };
-        Self::rate_scaled(rates, features, err, k, 1.0)
-    }
-
-    /// [`Adaptation::rate`] with the normalization factor given (`scale`, applied when
-    /// `rates.normalized`), so a caller that needs it twice computes it once, and only
-    /// `torque_share` of the torque rates c_R, c_ω (the composite law's
+    /// ȧ of the gradient law for the given features and errors, with the robust clipping, the
+    /// normalization factor `scale` ([`Adaptation::feature_normalization`], applied when
+    /// `rates.normalized`; computed once by the caller, who needs it for the composite law
+    /// too) and only `torque_share` of the torque rates c_R, c_ω (the composite law's
     /// [`CompositeGains::torque_rate_scale`]; 1 for the gradient law).
-    pub fn rate_scaled(
+    pub fn rate(
         rates: &AdaptationRates,
         features: &SMatrix<f32, 6, FEATURES>,
         err: &TrackingError,
@@ -405,23 +390,9 @@ impl Adaptation {
         )
     }
 
-    /// One explicit-Euler step of the gradient law a ← Proj(a + dt ȧ). A non-finite update is
-    /// dropped.
+    /// One explicit-Euler step of the gradient law a ← Proj(a + dt ȧ), ȧ from
+    /// [`Adaptation::rate`]. A non-finite update is dropped.
     pub fn step(
-        &mut self,
-        rates: &AdaptationRates,
-        features: &SMatrix<f32, 6, FEATURES>,
-        err: &TrackingError,
-        mass_kg: f32,
-        dt_s: f32,
-    ) {
-        let next = self.a + Self::rate(rates, features, err, mass_kg) * dt_s;
-        self.set_projected(next, rates.a_max);
-    }
-
-    /// [`Adaptation::step`] with the normalization factor and the torque rates' share given
-    /// (see [`Adaptation::rate_scaled`]).
-    pub fn step_scaled(
         &mut self,
         rates: &AdaptationRates,
         features: &SMatrix<f32, 6, FEATURES>,
@@ -429,7 +400,7 @@ impl Adaptation {
         (scale, torque_share): (f32, f32),
         dt_s: f32,
     ) {
-        let next = self.a + Self::rate_scaled(rates, features, err, scale, torque_share) * dt_s;
+        let next = self.a + Self::rate(rates, features, err, scale, torque_share) * dt_s;
         self.set_projected(next, rates.a_max);
     }
 
@@ -569,7 +540,8 @@ impl Adaptation {
     fn kalman(&mut self, g: &CompositeGains, a_max: f32, q_dt_s: f32) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a 6×6 matrix, updated in place (no copy of its 36 entries in
         // and out); the updates below read and write its upper triangle only (the lower one is
-        // mirrored on demand by `covariance`), so P stays exactly symmetric. Column-major storage: p[c][r] is P(r, c).
+        // mirrored on demand by `covariance`), so P stays exactly symmetric. Column-major
+        // storage: p[c][r] is P(r, c).
         // A P whose diagonal is not positive starts again here. A non-finite entry of the upper
         // triangle (the only part read) needs no pass of its own: it makes some s non-finite
         // below, which drops this tick's update and starts P again.

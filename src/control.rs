@@ -714,13 +714,8 @@ impl<M: HamiltonianModel> FlightController<M> {
                 };
                 #[cfg(not(feature = "composite"))]
                 let torque_share = 1.0;
-                self.adaptation.step_scaled(
-                    &g.rates,
-                    &t.features,
-                    &errors,
-                    (scale, torque_share),
-                    dt_s,
-                );
+                self.adaptation
+                    .step(&g.rates, &t.features, &errors, (scale, torque_share), dt_s);
             }
             #[cfg(feature = "composite")]
             self.adaptation.record_input(&delivered);
