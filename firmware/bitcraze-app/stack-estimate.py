@@ -1,10 +1,12 @@
 #!/usr/bin/env python3
-"""stack-estimate.py ELF FUNCTION [FUNCTION...]: worst-case stack of each FUNCTION in a linked
+"""stack-estimate.py ELF FUNCTION[=BUDGET] [...]: worst-case stack of each FUNCTION in a linked
 Cortex-M ELF, from its disassembly (arm-none-eabi-objdump): the largest sum of frame sizes (push,
 vpush, sub sp) along any call path (bl, blx, and b to another function, counted as a call: an
 over-estimate for tail calls). Recursion is cut at the first repeat. Prints the deepest path.
+With =BUDGET (bytes), exits 1 when FUNCTION needs more.
 
-build-in-tree.sh runs it on cf2.elf for the two tasks that run hamflight code.
+build-in-tree.sh runs it on cf2.elf for the two tasks that run hamflight code; ci-check.sh on
+the Rust object alone, for hf_step.
 """
 import re
 import subprocess
@@ -59,7 +61,9 @@ def main():
         print(__doc__, file=sys.stderr)
         sys.exit(2)
     frames, calls = parse(sys.argv[1])
-    for fn in sys.argv[2:]:
+    over = False
+    for arg in sys.argv[2:]:
+        fn, _, budget = arg.partition("=")
         if fn not in frames:
             print(f"{fn}: not in {sys.argv[1]}", file=sys.stderr)
             sys.exit(1)
@@ -67,7 +71,14 @@ def main():
         print(f"{fn}: worst-case stack {total} B")
         for name, size in path:
             print(f"    {size:5d}  {name[:90]}")
-
+        if budget:
+            if total > int(budget):
+                print(f"{fn} needs {total} B of stack, more than its budget of {budget} B",
+                      file=sys.stderr)
+                over = True
+            else:
+                print(f"{fn}: {total} B of stack, within {budget} B")
+    sys.exit(1 if over else 0)
 
 if __name__ == "__main__":
     main()
