@@ -21,7 +21,7 @@ use crate::adapt::{
     Adaptation, AdaptationLaw, AdaptationRates, CompositeGains, Measurement, TrackingError,
 };
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
-use crate::model::{HamiltonianModel, State, DEFAULT_MOTOR_TAU_S, FEATURES, MASS_KG};
+use crate::model::{HamiltonianModel, ModelTerms, State, DEFAULT_MOTOR_TAU_S, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
 use crate::shaping::SetpointShaper;
 use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
@@ -400,7 +400,7 @@ pub fn is_rotation(r: &Matrix3<f32>) -> bool {
 }
 
 /// What one control step produces.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Output {
     /// Rotor commands to apply ([`RotorCommand::OFF`] on a fault).
     pub rotors: RotorCommand,
@@ -445,6 +445,8 @@ pub struct FlightController<M> {
     /// velocity-consistency correction c (m/s, world), for [`Gains::velocity_consistency_tau_s`].
     prev_p_m: Option<(Vector3<f32>, Vector3<f32>)>,
     velocity_correction_m_s: Vector3<f32>,
+    /// The model's terms at this tick's state, written in place by the step.
+    terms: ModelTerms,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
@@ -462,6 +464,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             u_model: None,
             prev_p_m: None,
             velocity_correction_m_s: Vector3::zeros(),
+            terms: ModelTerms::ZERO,
         }
     }
 
@@ -550,6 +553,21 @@ impl<M: HamiltonianModel> FlightController<M> {
         meas: &Measurement,
         dt_s: f32,
     ) -> Output {
+        let mut out = Output::default();
+        self.step_into(state, sp, meas, dt_s, &mut out);
+        out
+    }
+
+    /// [`FlightController::step_measured`] written into `out`: for a caller that keeps the
+    /// output in place (the Crazyflie app, whose stabilizer task has a small stack).
+    pub fn step_into(
+        &mut self,
+        state: &State,
+        sp: &Setpoint,
+        meas: &Measurement,
+        dt_s: f32,
+        out: &mut Output,
+    ) {
         // Without the composite law nothing reads the measurement.
         #[cfg(not(feature = "composite"))]
         let _ = meas;
@@ -560,7 +578,8 @@ impl<M: HamiltonianModel> FlightController<M> {
             ..Faults::default()
         };
         if faults.is_fault() {
-            return self.safe(faults);
+            *out = self.safe(faults);
+            return;
         }
         let shaped = self.shaper.shape(sp, dt_s, self.gains.shaping_omega_rad_s);
         let sp = &shaped;
@@ -568,17 +587,55 @@ impl<M: HamiltonianModel> FlightController<M> {
             self.tilt = TiltLimit::new(self.gains.max_tilt_rad);
         }
         let v_law = self.consistent_velocity(state, dt_s);
+        self.model.write_terms(state, &mut self.terms);
+        let Some(inertia) = self.terms.inertia_inv.try_inverse() else {
+            faults.numeric = true;
+            *out = self.safe(faults);
+            return;
+        };
+        let demand = self.demand(state, sp, &v_law, &inertia, dt_s);
+        faults.tilt_limited = demand.tilt_limited;
+        let act = self.actuate(&demand.b_act, dt_s);
+        faults.saturation = act.sat;
+        let errors = &demand.errors;
+        if act.singular || !(act.u.iter().all(|x| x.is_finite()) && errors_finite(errors)) {
+            faults.numeric = true;
+            *out = self.safe(faults);
+            return;
+        }
+        if self.gains.adapt {
+            self.adapt(state, meas, &inertia, errors, &act, dt_s);
+        }
+        *out = Output {
+            rotors: act.rotors,
+            wrench: act.wrench,
+            command: act.commanded,
+            a: self.adaptation.a,
+            errors: *errors,
+            faults,
+        };
+    }
+
+    /// The law's body-frame demand b = [b_v; b_ω] on the actuated rows and its errors (paper
+    /// eq. `ES_DI_COMP_control`, docs/math.md "The IDA-PBC control law"). Out of line, as are
+    /// [`Self::actuate`] and [`Self::adapt`]: each phase's temporaries then live in its own
+    /// frame, not all at once in the step's, which keeps the step's stack small enough to run
+    /// inline in the Crazyflie's stabilizer task.
+    #[inline(never)]
+    fn demand(
+        &mut self,
+        state: &State,
+        sp: &Setpoint,
+        v: &Vector3<f32>,
+        inertia: &Matrix3<f32>,
+        dt_s: f32,
+    ) -> Demand {
         let g = &self.gains;
-        let t = self.model.terms(state);
+        let t = &self.terms;
         let m = t.mass_kg;
         let r = &state.rot;
         let rt = r.transpose();
-        let v = &v_law;
         let w = &state.w_body_rad_s;
-        let Some(inertia) = t.inertia_inv.try_inverse() else {
-            faults.numeric = true;
-            return self.safe(faults);
-        };
         let wa = t.features * self.adaptation.a;
         let wa_v = Vector3::new(wa.x, wa.y, wa.z);
         let wa_w = Vector3::new(wa.w, wa.a, wa.b);
@@ -610,6 +667,8 @@ impl<M: HamiltonianModel> FlightController<M> {
             self.comp_prev_n = Some(comp);
             f_dot -= self.comp_rate_n_s;
         }
+        #[cfg(not(feature = "composite"))]
+        let _ = dt_s;
         let att = desired_attitude(
             &(r * b_v),
             &f_dot,
@@ -617,7 +676,6 @@ impl<M: HamiltonianModel> FlightController<M> {
             sp.yaw_rate_rad_s,
             &self.tilt,
         );
-        faults.tilt_limited = att.tilt_limited;
         let e_r = crate::lie::rotation_error(r, &att.rot);
         let w_des_body = rt * att.rot * att.w_rad_s;
         let e_w = w - w_des_body;
@@ -626,17 +684,30 @@ impl<M: HamiltonianModel> FlightController<M> {
         let p_w = inertia * w;
         let p_dot_des_w = -(inertia * w.cross(&w_des_body));
         let b_w = w.cross(&p_w) - e_r * g.k_r + p_dot_des_w - e_w * g.k_w - wa_w;
+        Demand {
+            b_act: Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z),
+            errors: TrackingError { e_p, e_v, e_r, e_w },
+            tilt_limited: att.tilt_limited,
+        }
+    }
 
-        // u = g† b on the actuated rows (body z force, torques).
-        let g_act = t.gain.fixed_rows::<4>(2).into_owned();
-        let b_act = Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z);
+    /// u = g† b on the actuated rows (body z force, torques), the motor-lag lead, the mixer,
+    /// and the delivered wrench's motor model ([`Actuation::singular`] if g's actuated block
+    /// is singular).
+    #[inline(never)]
+    fn actuate(&mut self, b_act: &Vector4<f32>, dt_s: f32) -> Actuation {
+        let g = &self.gains;
+        let g_act = self.terms.gain.fixed_rows::<4>(2).into_owned();
+        let b_act = *b_act;
         let u = match g_act.try_inverse() {
             Some(inv) => inv * b_act,
             None => match (g_act.transpose() * g_act + Matrix4::identity() * 1e-9).try_inverse() {
                 Some(inv) => inv * g_act.transpose() * b_act,
                 None => {
-                    faults.numeric = true;
-                    return self.safe(faults);
+                    return Actuation {
+                        singular: true,
+                        ..Actuation::default()
+                    }
                 }
             },
         };
@@ -674,61 +745,96 @@ impl<M: HamiltonianModel> FlightController<M> {
             };
             self.u_model = next.iter().all(|x| x.is_finite()).then_some(next);
         }
-        faults.saturation = sat;
-        let errors = TrackingError { e_p, e_v, e_r, e_w };
-        if !(u.iter().all(|x| x.is_finite()) && errors_finite(&errors)) {
-            faults.numeric = true;
-            return self.safe(faults);
-        }
-
-        // Adaptation (paper eq. geometric_adaptive_law, with the robust clipping of
-        // crate::adapt); the tracking term is frozen while the mixer cannot deliver the wrench,
-        // so the estimate does not wind up on an unreachable demand. The composite law's
-        // prediction term compares with the wrench actually delivered, so it keeps running.
-        if g.adapt {
-            // The features' normalization, once for both terms.
-            let scale = Adaptation::feature_normalization(&t.features, m);
-            #[cfg(feature = "composite")]
-            if g.law == AdaptationLaw::Composite {
-                let x = PredictionInput {
-                    features: &t.features,
-                    gain: &t.gain,
-                    mass_kg: m,
-                    gravity_m_s2: t.gravity_m_s2,
-                    inertia: &inertia,
-                    rot: r,
-                    v_body_m_s: &state.v_body_m_s,
-                    w_body_rad_s: w,
-                    measurement: meas,
-                    feature_scale: scale,
-                };
-                self.adaptation
-                    .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
-            }
-            if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
-                #[cfg(feature = "composite")]
-                let torque_share = if g.law == AdaptationLaw::Composite {
-                    g.composite.torque_rate_scale
-                } else {
-                    1.0
-                };
-                #[cfg(not(feature = "composite"))]
-                let torque_share = 1.0;
-                self.adaptation
-                    .step(&g.rates, &t.features, &errors, (scale, torque_share), dt_s);
-            }
-            #[cfg(feature = "composite")]
-            self.adaptation.record_input(&delivered);
-        }
-        Output {
-            rotors,
+        Actuation {
+            singular: false,
+            u,
             wrench,
-            command: commanded,
-            a: self.adaptation.a,
-            errors,
-            faults,
+            commanded,
+            rotors,
+            sat,
+            delivered,
         }
     }
+
+    /// Adaptation (paper eq. geometric_adaptive_law, with the robust clipping of
+    /// crate::adapt); the tracking term is frozen while the mixer cannot deliver the wrench,
+    /// so the estimate does not wind up on an unreachable demand. The composite law's
+    /// prediction term compares with the wrench actually delivered, so it keeps running.
+    #[inline(never)]
+    fn adapt(
+        &mut self,
+        state: &State,
+        meas: &Measurement,
+        inertia: &Matrix3<f32>,
+        errors: &TrackingError,
+        act: &Actuation,
+        dt_s: f32,
+    ) {
+        let t = &self.terms;
+        #[cfg(not(feature = "composite"))]
+        let _ = (state, meas, inertia);
+        let g = &self.gains;
+        let sat = act.sat;
+        // The features' normalization, once for both terms.
+        let scale = Adaptation::feature_normalization(&t.features, t.mass_kg);
+        #[cfg(feature = "composite")]
+        if g.law == AdaptationLaw::Composite {
+            let x = PredictionInput {
+                features: &t.features,
+                gain: &t.gain,
+                mass_kg: t.mass_kg,
+                gravity_m_s2: t.gravity_m_s2,
+                inertia,
+                rot: &state.rot,
+                v_body_m_s: &state.v_body_m_s,
+                w_body_rad_s: &state.w_body_rad_s,
+                measurement: meas,
+                feature_scale: scale,
+            };
+            self.adaptation
+                .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
+        }
+        if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
+            #[cfg(feature = "composite")]
+            let torque_share = if g.law == AdaptationLaw::Composite {
+                g.composite.torque_rate_scale
+            } else {
+                1.0
+            };
+            #[cfg(not(feature = "composite"))]
+            let torque_share = 1.0;
+            self.adaptation
+                .step(&g.rates, &t.features, errors, (scale, torque_share), dt_s);
+        }
+        #[cfg(feature = "composite")]
+        self.adaptation.record_input(&act.delivered);
+        #[cfg(not(feature = "composite"))]
+        let _ = act.delivered;
+    }
+}
+
+/// What [`FlightController::demand`] gives the rest of the step.
+struct Demand {
+    /// b on the actuated rows: [b_v,z (N); b_ω (N·m)].
+    b_act: Vector4<f32>,
+    errors: TrackingError,
+    tilt_limited: bool,
+}
+
+/// What [`FlightController::actuate`] gives the rest of the step.
+#[derive(Default)]
+struct Actuation {
+    /// g's actuated block was singular: nothing else is set.
+    singular: bool,
+    /// u = g† b = [f (N); τ (N·m)].
+    u: Vector4<f32>,
+    /// u as a wrench, and with the motor-lag lead.
+    wrench: Wrench,
+    commanded: Wrench,
+    rotors: RotorCommand,
+    sat: Saturation,
+    /// The wrench `rotors` deliver.
+    delivered: Wrench,
 }
 
 impl<M> FlightController<M> {

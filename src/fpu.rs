@@ -568,6 +568,37 @@ pub fn affine<const I: usize, const O: usize>(
     layer::<I, O, false>(w, b, x)
 }
 
+/// [`affine`] written into `y`: on the M4F the kernel stores straight into it, with no
+/// temporary on the stack.
+#[inline]
+pub fn affine_into<const I: usize, const O: usize>(
+    w: &[[f32; I]; O],
+    b: &[f32; O],
+    x: &[f32; I],
+    y: &mut [f32; O],
+) {
+    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+    if m4f_shape(I, O) {
+        let (wp, bp, xp, yp) = (
+            w.as_ptr().cast::<f32>(),
+            b.as_ptr(),
+            x.as_ptr(),
+            y.as_mut_ptr(),
+        );
+        // SAFETY: `w` is O contiguous rows of I f32, `b` and `y` hold O, `x` holds I, O is
+        // even and > 0.
+        unsafe {
+            if I == 16 {
+                m4f::rows16(wp, bp, xp, yp, O);
+            } else {
+                m4f::rows9(wp, bp, xp, yp, O);
+            }
+        }
+        return;
+    }
+    *y = layer::<I, O, false>(w, b, x);
+}
+
 /// tanh(W x + b), elementwise: [`affine`] then [`tanh`], the same bits; on the M4F one kernel
 /// per layer with the activation applied in registers.
 #[inline]

@@ -59,6 +59,12 @@ impl<const I: usize, const O: usize> Dense<I, O> {
         fpu::affine(&self.weight, &self.bias, x)
     }
 
+    /// [`Dense::forward`] written into `y` ([`fpu::affine_into`]).
+    #[inline]
+    pub fn forward_into(&self, x: &[f32; I], y: &mut [f32; O]) {
+        fpu::affine_into(&self.weight, &self.bias, x, y)
+    }
+
     /// tanh(W x + b) elementwise ([`fpu::affine_tanh`]): the same bits as [`Dense::forward`]
     /// followed by [`tanh`], in one kernel on the M4F.
     #[inline]
@@ -173,6 +179,12 @@ impl<const I: usize, const H: usize, const O: usize> Mlp<I, H, O> {
     #[inline]
     pub fn forward(&self, x: &[f32; I]) -> [f32; O] {
         self.l2.forward(&hidden(&self.l0, &self.l1, x))
+    }
+
+    /// [`Mlp::forward`] written into `y`.
+    #[inline]
+    pub fn forward_into(&self, x: &[f32; I], y: &mut [f32; O]) {
+        self.l2.forward_into(&hidden(&self.l0, &self.l1, x), y)
     }
 
     /// Forward pass and Jacobian–vector product: returns `(y, J dx)` with J = ∂y/∂x at `x`.

@@ -43,14 +43,18 @@
  *   - LANDED: airborne and supervisorIsFlying() turned false (Bitcraze says so after 2 s of low
  *     thrust): a is reset, back to GROUND with z_ground := the estimated z.
  *
- * Stack: the core's step needs about 2.2 KB of stack (FlightController::step alone has a 952-byte
- * frame); the stabilizer task has 1,800 bytes in all (STABILIZER_TASK_STACKSIZE, fixed in
- * Bitcraze's config.h). So the step runs in the app task (CONFIG_APP_STACKSIZE words of stack,
- * at the stabilizer's priority, app-config): controllerOutOfTree prepares the inputs, hands them
- * over with a semaphore and waits for the result, at most HF_WORKER_TIMEOUT_TICKS. A step that
- * does not come back in time, or a worker that is not running (yet, or after a failed
- * hf_self_test), gives a zero wrench and HF_SHIM_WORKER_TIMEOUT in the faults log; until a late
- * step has finished, the stabilizer does not touch the controller.
+ * Stack: the core's step runs inline, in the stabilizer task (1,800 bytes in all,
+ * STABILIZER_TASK_STACKSIZE in Bitcraze's config.h). Its worst case, measured from the Rust
+ * object by ci-check.sh (stack-estimate.py), is about 1.1 KB including controllerOutOfTree's
+ * own frame; build-in-tree.sh checks controllerOutOfTree in the linked cf2.elf. The app task
+ * (CONFIG_APP_STACKSIZE words, app-config) does what needs more: at boot hf_init (which builds
+ * the controller on its stack: too deep for the system task's 1,200 B, where
+ * controllerOutOfTreeInit first runs) and hf_self_test(), which runs a step on a scratch
+ * controller; later the model swaps of an upload or a revert (decode and self test, about 2 ms,
+ * on the ground only). controllerOutOfTreeInit stays light. Until the self test has passed, the output is
+ * zero with HF_SHIM_NOT_READY in the faults log; during a swap the stabilizer does not touch the
+ * controller and outputs zero with HF_SHIM_SWAPPING. The hand-over is one atomic byte (swapJob):
+ * the stabilizer sets it, the app task polls it every HF_SWAP_POLL_MS and clears it when done.
  *
  * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
  * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m),
@@ -59,8 +63,9 @@
  * and rows, in a's units; refused values revert).
  *
  * Weights over the radio (MEM_TYPE_APP, see "Upload" below and README.md): a client writes a
- * weight blob into a RAM staging slot; the memory task checks it at the commit; the worker
- * decodes it, self-tests it and makes it fly at the first tick the controller is not airborne.
+ * weight blob into a RAM staging slot; the memory task checks it at the commit; the
+ * app task decodes it, self-tests it and makes it fly at the first tick the controller is not
+ * airborne.
  * Parameter revert (write 1) goes back to the compiled-in blob the same way. RAM only: every
  * boot flies the compiled-in blob.
  * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
@@ -85,7 +90,6 @@
 #include "param.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
-#include "semphr.h"
 #include "supervisor.h"
 #include "task.h"
 
@@ -113,6 +117,10 @@
 #define HAMFLIGHT_DEFAULT_LAW HF_LAW_GRADIENT
 #endif
 
+/* The helpers controllerOutOfTree calls before the step stay out of line: their temporaries
+ * then do not sit in its frame under the step's (see "Stack" at the top). */
+#define HF_NOINLINE __attribute__((noinline))
+
 #define HF_DT_S (1.0f / (float)HAMFLIGHT_RATE_HZ)
 #define HF_DEG_TO_RAD 0.017453292519943295f
 #define HF_PI 3.14159265358979f
@@ -122,14 +130,14 @@
 #define HF_STOP_THRUST 1000.0f
 #define HF_DEFAULT_LEASH_M 0.3f
 
-/* Shim-level fault bit of the faults log: the worker did not return the step in time. */
-#define HF_SHIM_WORKER_TIMEOUT (1u << 16)
-/* Shim-level bit of the faults log: the worker is swapping the model (zero output, on the
+/* Shim-level fault bit of the faults log: the app task's boot self test has not passed (yet,
+ * or it failed): zero output. */
+#define HF_SHIM_NOT_READY (1u << 16)
+/* Shim-level bit of the faults log: the app task is swapping the model (zero output, on the
  * ground only). */
 #define HF_SHIM_SWAPPING (1u << 17)
-/* How long the stabilizer waits for the worker, in FreeRTOS ticks of 1 ms: 2, because a
- * 1-tick timeout ends at the next tick interrupt, which may come at once. */
-#define HF_WORKER_TIMEOUT_TICKS 2
+/* How often the app task looks for a swap to do (ms). */
+#define HF_SWAP_POLL_MS 10
 
 enum { HF_PHASE_OFF = 0, HF_PHASE_GROUND = 1, HF_PHASE_AIRBORNE = 2 };
 
@@ -188,7 +196,7 @@ static float logPTrace;
  * The end of an upload is the COMMIT, not a byte count: a chunk that never arrived is a zero
  * in the slot and fails the CRC (a torn upload), and a blob whose own header length disagrees
  * with len fails the length check. Writes are refused (EIO to the client) outside a session
- * or the window and while the worker is swapping.
+ * or the window and while the app task is swapping.
  * States: IDLE -> BEGIN -> RECEIVING -> COMMIT -> PENDING (checked) or REJECTED; PENDING ->
  * (first tick not airborne) SWAPPING -> ACTIVE, or REJECTED if the self test fails. A new
  * BEGIN while PENDING drops the pending upload. The flying model is never touched by a
@@ -210,13 +218,22 @@ enum {
   HF_UP_ACTIVE = 4,
   HF_UP_REJECTED = 5
 };
-/* What the worker is asked to do. */
-enum { HF_JOB_STEP = 0, HF_JOB_LOAD = 1, HF_JOB_REVERT = 2 };
+/* What the app task is asked to do (swapJob). */
+enum { HF_JOB_NONE = 0, HF_JOB_LOAD = 1, HF_JOB_REVERT = 2 };
 
 static uint8_t upState = HF_UP_IDLE; /* HF_UP_*, changed with __atomic (memory task, stabilizer) */
 static uint8_t upError;
 static uint8_t revertRequest; /* parameter: write 1 to fly the compiled-in blob again */
-static volatile uint8_t job = HF_JOB_STEP;
+/* HF_JOB_*, with __atomic: set by the stabilizer (only when HF_JOB_NONE), cleared by the app
+ * task when the swap is done. While it is not HF_JOB_NONE the app task owns the controller. */
+static uint8_t swapJob = HF_JOB_NONE;
+/* The app task's boot self test passed (__atomic). */
+static bool ready;
+
+static uint8_t jobLoad(void) { return __atomic_load_n(&swapJob, __ATOMIC_SEQ_CST); }
+static void jobStore(uint8_t v) { __atomic_store_n(&swapJob, v, __ATOMIC_SEQ_CST); }
+static bool swapping(void) { return jobLoad() != HF_JOB_NONE; }
+static bool isReady(void) { return __atomic_load_n(&ready, __ATOMIC_SEQ_CST); }
 /* The active blob (logs blobSrc, blobCrc). */
 static uint8_t activeSource; /* 0 compiled-in, 1 uploaded */
 static uint32_t activeCrc;
@@ -376,9 +393,9 @@ static void printActive(void) {
   }
 }
 
-/* The worker's swap (HF_JOB_LOAD, HF_JOB_REVERT), with the controller to itself: the
+/* The app task's swap (HF_JOB_LOAD, HF_JOB_REVERT), with the controller to itself: the
  * stabilizer started it while not airborne and outputs zero until it is done. */
-static void serveSwap(void) {
+static void serveSwap(uint8_t job) {
   (void)hf_use_model(&ctl, NULL); /* nothing flies the slot while it is loaded */
   setActiveBuiltin();
 #if HAMFLIGHT_UPLOAD
@@ -403,33 +420,12 @@ static void serveSwap(void) {
   printActive();
 }
 
-/* One step of the core on the inputs in hfState/hfSetpoint: the only deep call. */
+/* One step of the core on the inputs in hfState/hfSetpoint: the only deep call, inline in the
+ * stabilizer task. */
 static void serveStep(void) {
   const uint32_t start = DWT->CYCCNT;
   hf_step(&ctl, &hfState, &hfSetpoint, HF_DT_S, &hfOut);
   logCycles = DWT->CYCCNT - start;
-}
-
-static StaticSemaphore_t requestBuffer;
-static StaticSemaphore_t doneBuffer;
-static SemaphoreHandle_t request;
-static SemaphoreHandle_t done;
-static volatile bool workerReady;
-/* The stabilizer numbers its requests; the worker reports the last one it finished. */
-static volatile uint32_t requestSeq;
-static volatile uint32_t doneSeq;
-
-/* True if nothing else is touching the controller: the worker runs and is idle. */
-static bool workerIdle(void) { return workerReady && doneSeq == requestSeq; }
-
-/* Runs the step in the worker (call only when workerIdle()); false if it did not complete in
- * time. */
-static bool runStep(void) {
-  (void)xSemaphoreTake(done, 0); /* drop a late completion of an earlier request */
-  job = HF_JOB_STEP;
-  requestSeq = requestSeq + 1u;
-  xSemaphoreGive(request);
-  return xSemaphoreTake(done, HF_WORKER_TIMEOUT_TICKS) == pdTRUE && doneSeq == requestSeq;
 }
 
 static void enableCycleCounter(void) {
@@ -460,10 +456,10 @@ static void disengage(void) {
   phase = HF_PHASE_OFF;
 }
 
-/* Hands the worker a pending swap (an upload that passed its check, or a revert) if the
- * vehicle is not airborne and the worker idle; true if it did (the caller outputs zero). */
-static bool startSwapIfDue(void) {
-  if (!isInit || phase == HF_PHASE_AIRBORNE || !workerIdle()) {
+/* Hands the app task a pending swap (an upload that passed its check, or a revert) if the
+ * vehicle is not airborne; true if it did (the caller outputs zero). */
+static HF_NOINLINE bool startSwapIfDue(void) {
+  if (!isInit || phase == HF_PHASE_AIRBORNE || swapping()) {
     return false;
   }
   uint8_t next;
@@ -477,10 +473,7 @@ static bool startSwapIfDue(void) {
     return false;
   }
   disengage(); /* the next engagement starts over with the new model */
-  (void)xSemaphoreTake(done, 0);
-  job = next;
-  requestSeq = requestSeq + 1u;
-  xSemaphoreGive(request);
+  jobStore(next);
   return true;
 }
 
@@ -516,7 +509,7 @@ static void quatToRot(float x, float y, float z, float w, float r[3][3]) {
 
 static float yawOfRot(const float r[3][3]) { return atan2f(r[1][0], r[0][0]); }
 
-static void convertState(const state_t *state, const sensorData_t *sensors, hf_state_t *s) {
+static HF_NOINLINE void convertState(const state_t *state, const sensorData_t *sensors, hf_state_t *s) {
   const quaternion_t *q = &state->attitudeQuaternion;
   quatToRot(q->x, q->y, q->z, q->w, s->rot);
   s->p_m[0] = state->position.x;
@@ -538,7 +531,7 @@ static void convertState(const state_t *state, const sensorData_t *sensors, hf_s
 
 static float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
-static void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoint_t *out) {
+static HF_NOINLINE void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoint_t *out) {
   /* Yaw. */
   float yawRate = 0.0f;
   if (sp->mode.yaw == modeAbs) {
@@ -590,7 +583,7 @@ static void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoi
 
 /* Apply parameter writes: gains and the composite law's Q and R (refused ones are reverted to
  * what the core holds), the law (only while not airborne: a switch resets a), reset. */
-static void applyParams(void) {
+static HF_NOINLINE void applyParams(void) {
   if (hf_set_gains(&ctl, &gains) != HF_OK) {
     hf_get_gains(&ctl, &gains);
   }
@@ -608,7 +601,7 @@ static void applyParams(void) {
 }
 
 /* GROUND / AIRBORNE / LANDED (see the top of the file). */
-static void updatePhase(const hf_state_t *s) {
+static HF_NOINLINE void updatePhase(const hf_state_t *s) {
   const bool flying = supervisorIsFlying();
   if (phase == HF_PHASE_OFF) {
     phase = HF_PHASE_GROUND;
@@ -629,7 +622,7 @@ static void updatePhase(const hf_state_t *s) {
   hf_set_adapt(&ctl, adaptOn && phase == HF_PHASE_AIRBORNE);
 }
 
-static void updateLogs(void) {
+static HF_NOINLINE void updateLogs(void) {
   hf_get_estimate(&ctl, logA);
   (void)hf_get_prediction_error(&ctl, logEps);
   logPTrace = hf_p_trace(&ctl);
@@ -643,12 +636,7 @@ static void updateLogs(void) {
 
 void controllerOutOfTreeInit(void) {
   if (!isInit) {
-    hf_init(&ctl);
-    if (hf_set_law(&ctl, lawParam) != HF_OK) {
-      lawParam = (uint8_t)hf_get_law(&ctl);
-    }
-    hf_get_gains(&ctl, &gains);
-    hf_get_composite(&ctl, &composite);
+    /* The controller itself is built by the app task (initController). */
     enableCycleCounter();
     setActiveBuiltin();
     /* Memory handlers may only be registered before crtpMemInit() (its task blocks further
@@ -665,9 +653,10 @@ void controllerOutOfTreeInit(void) {
 #endif
     isInit = true;
   }
-  /* A late step still running in the worker owns the controller: then only mark the phase; the
-   * next engagement resets a anyway. */
-  if (!workerReady || workerIdle()) {
+  /* Before the app task has built and tested the controller, or while it swaps the model, the
+   * app task owns the controller: then only mark the phase (the controller starts, and a swap
+   * ends, with a = 0 anyway). */
+  if (isReady() && !swapping()) {
     disengage();
   } else {
     phase = HF_PHASE_OFF;
@@ -686,16 +675,16 @@ void controllerOutOfTreeInit(void) {
 #endif
 }
 
-/* Light: it may run on a small stack. The worker runs hf_self_test() when it starts. */
+/* Light: it may run on a small stack. The app task runs hf_self_test() when it starts. */
 bool controllerOutOfTreeTest(void) { return isInit && hf_model_crc() != 0u; }
 
 void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
                          const sensorData_t *sensors, const state_t *state,
                          const stabilizerStep_t tick) {
-  /* A step still running in the worker (after a timeout) owns the controller: stay off. */
-  if (!workerIdle()) {
+  /* Before the self test passed, and while the app task swaps the model: off. */
+  if (!isReady() || swapping()) {
     zeroOutput(control);
-    hfOut.faults = (job == HF_JOB_STEP) ? HF_SHIM_WORKER_TIMEOUT : HF_SHIM_SWAPPING;
+    hfOut.faults = isReady() ? HF_SHIM_SWAPPING : HF_SHIM_NOT_READY;
     logFaults = hfOut.faults;
     return;
   }
@@ -725,12 +714,7 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   updatePhase(&hfState);
   convertSetpoint(setpoint, &hfState, &hfSetpoint);
 
-  if (!runStep()) {
-    zeroOutput(control);
-    hfOut.faults = HF_SHIM_WORKER_TIMEOUT;
-    updateLogs();
-    return;
-  }
+  serveStep();
 
   control->controlMode = controlModeForceTorque;
   control->thrustSi = hfOut.thrust_n;
@@ -740,29 +724,38 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   updateLogs();
 }
 
-/* The app task: the worker that runs the core's step (see "Stack" at the top). */
+/* Builds the controller and gives the parameters its defaults. In the app task: hf_init
+ * constructs the controller on its stack (about 2.6 KB deep with the vehicle's gains), more than
+ * the system task has (1,200 B), where controllerOutOfTreeInit first runs. */
+static void initController(void) {
+  hf_init(&ctl);
+  if (hf_set_law(&ctl, lawParam) != HF_OK) {
+    lawParam = (uint8_t)hf_get_law(&ctl);
+  }
+  hf_get_gains(&ctl, &gains);
+  hf_get_composite(&ctl, &composite);
+  hf_set_adapt(&ctl, false);
+}
+
+/* The app task: the controller and its boot self test, then the model swaps (see "Stack" at the
+ * top). */
 void appMain(void) {
   DEBUG_PRINT("select with param stabilizer.controller = %d (out of tree)\n",
               (int)ControllerTypeOot);
+  initController();
   if (!hf_self_test()) {
     DEBUG_PRINT("self test FAILED: the controller stays off\n");
     for (;;) {
       vTaskDelay(M2T(60000));
     }
   }
-  request = xSemaphoreCreateBinaryStatic(&requestBuffer);
-  done = xSemaphoreCreateBinaryStatic(&doneBuffer);
-  workerReady = true;
+  __atomic_store_n(&ready, true, __ATOMIC_SEQ_CST);
   for (;;) {
-    if (xSemaphoreTake(request, portMAX_DELAY) == pdTRUE) {
-      const uint32_t seq = requestSeq;
-      if (job == HF_JOB_STEP) {
-        serveStep();
-      } else {
-        serveSwap();
-      }
-      doneSeq = seq;
-      xSemaphoreGive(done);
+    vTaskDelay(M2T(HF_SWAP_POLL_MS));
+    const uint8_t job = jobLoad();
+    if (job != HF_JOB_NONE) {
+      serveSwap(job);
+      jobStore(HF_JOB_NONE);
     }
   }
 }

@@ -4,8 +4,9 @@
 //! library, flown in the SITL the way crazyflie-firmware's stabilizer drives it: called at
 //! 1 kHz with `tick`, with the state as Bitcraze's estimator gives it (position, quaternion
 //! x y z w, world velocity) and the gyro in deg/s; its force/torque output is mixed with the
-//! core's mixer, as the native controller's is. The core's step runs in the shim's worker task
-//! (appMain, here a thread, with the FreeRTOS semaphores on pthreads), as on the vehicle.
+//! core's mixer, as the native controller's is. The core's step runs inline in the stabilizer's
+//! call, as on the vehicle; the shim's app task (appMain: the boot self test, model swaps) runs
+//! in a thread.
 //!
 //! Run in release (`cargo test --release -p host-train --test bitcraze_oot`).
 
@@ -57,8 +58,8 @@ extern "C" {
         ty: *mut u32,
     ) -> *mut c_void;
     fn hf_host_debug_text() -> *const c_char;
-    fn hf_host_start_worker();
-    fn hf_host_stall_worker(on: bool);
+    fn hf_host_start_app_task();
+    fn hf_host_stall_app_task(on: bool);
     fn hf_host_mem_type() -> c_int;
     fn hf_host_mem_registrations() -> c_int;
     fn hf_host_mem_size() -> u32;
@@ -79,11 +80,11 @@ const LOG_UINT8: u32 = 1;
 const LOG_UINT32: u32 = 3;
 const LOG_FLOAT: u32 = 7;
 
-/// The shim's fault bit of the `faults` log: the worker task did not return the step in time.
-const WORKER_TIMEOUT: u32 = 1 << 16;
+/// The shim's fault bit of the `faults` log: the app task's boot self test has not passed.
+const NOT_READY: u32 = 1 << 16;
 
-/// The shim's worker task (appMain) runs in a thread, started once.
-static WORKER: OnceLock<()> = OnceLock::new();
+/// The shim's app task (appMain) runs in a thread, started once.
+static APP_TASK: OnceLock<()> = OnceLock::new();
 
 /// The shim is global C state: one test at a time holds it.
 static SHIM_LOCK: Mutex<()> = Mutex::new(());
@@ -131,7 +132,7 @@ const UP_REJECTED: u8 = 5;
 const ERR_BLOB_TRUNCATED: u8 = 16;
 const ERR_BLOB_CRC: u8 = 20;
 const ERR_BLOB_MASS: u8 = 24;
-/// The shim's fault bit of the `faults` log while the worker swaps the model.
+/// The shim's fault bit of the `faults` log while the app task swaps the model.
 const SWAPPING: u32 = 1 << 17;
 /// cflib's `_WriteRequest.MAX_DATA_LENGTH` and `_ReadRequest.MAX_DATA_LENGTH` (0.1.34).
 const CFLIB_CHUNK: usize = 24;
@@ -168,7 +169,7 @@ impl Shim {
             _guard: guard,
             tick: 0,
         };
-        WORKER.get_or_init(|| shim.start_worker());
+        APP_TASK.get_or_init(|| shim.start_app_task());
         let (f, b) = DEFAULTS.get_or_init(|| {
             (
                 F32_PARAMS.iter().map(|n| shim.param_f32(n)).collect(),
@@ -178,7 +179,9 @@ impl Shim {
         for (n, v) in F32_PARAMS.iter().zip(f) {
             shim.set_param_f32(n, *v);
         }
-        // A test that left an upload flying (or pending) must not change the next one's model.
+        // A test that left an upload flying, pending or still swapping in the app task must not
+        // change the next one's model: let a swap in progress end first.
+        shim.wait_for_swap();
         if shim.log_u8("blobSrc") != 0 || shim.log_u8("upState") == UP_PENDING {
             shim.set_param_u8("revert", 1);
             shim.wait_for_swap();
@@ -194,11 +197,12 @@ impl Shim {
         for (n, v) in U8_PARAMS.iter().zip(b) {
             shim.set_param_u8(n, *v);
         }
+        shim.tick = 0;
         shim
     }
 
     /// Ticks (with whatever state and setpoint are set) until no swap is pending or running:
-    /// the worker swaps asynchronously, the stabilizer outputs zero meanwhile.
+    /// the app task swaps asynchronously, the stabilizer outputs zero meanwhile.
     fn wait_for_swap(&mut self) {
         let t0 = Instant::now();
         loop {
@@ -277,11 +281,11 @@ impl Shim {
         ok & self.mem_write(UP_CONTROL, &[UP_CMD_COMMIT])
     }
 
-    /// Starts appMain, the shim's worker task, in a thread and waits until it serves steps
-    /// (a probe step stops reporting the worker timeout), then initialises the shim again.
-    fn start_worker(&mut self) {
-        // SAFETY: exclusive (the lock); the worker thread lives until the process ends.
-        unsafe { hf_host_start_worker() };
+    /// Starts appMain, the shim's app task, in a thread and waits until its self test passed
+    /// (a probe step stops reporting "not ready"), then initialises the shim again.
+    fn start_app_task(&mut self) {
+        // SAFETY: exclusive (the lock); the thread lives until the process ends.
+        unsafe { hf_host_start_app_task() };
         self.supervisor(true, false);
         self.set_state(&PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0));
         self.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
@@ -289,10 +293,13 @@ impl Shim {
         loop {
             self.tick = 0;
             self.tick();
-            if self.log_u32("faults") & WORKER_TIMEOUT == 0 {
+            if self.log_u32("faults") & NOT_READY == 0 {
                 break;
             }
-            assert!(t0.elapsed() < Duration::from_secs(10), "the worker starts");
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "the app task starts"
+            );
             std::thread::sleep(Duration::from_millis(1));
         }
         // SAFETY: exclusive (the lock).
@@ -856,7 +863,12 @@ fn flight_phases_zero_output_ground_freeze_and_reset_after_landing() {
     for _ in 0..1000 {
         shim.set_state(&ground);
         let w = shim.tick();
-        assert!(w[0] > 0.0, "thrust builds up on the ground");
+        assert!(
+            w[0] > 0.0,
+            "thrust builds up on the ground: {w:?}, tick {}, faults {:#x}",
+            shim.tick,
+            shim.log_u32("faults")
+        );
     }
     assert_eq!(shim.log_u8("phase"), 1, "ground");
     assert_eq!(shim.estimate(), [0.0; 6], "frozen on the ground");
@@ -1008,13 +1020,13 @@ fn a_degenerate_quaternion_is_a_state_fault_with_zero_output() {
     assert_eq!(faults & 0x1F, 1, "HF_FAULT_BAD_STATE only: {faults:#x}");
 }
 
-/// Un-stalls the worker when dropped, so a failing test cannot hang the others.
+/// Un-stalls the app task when dropped, so a failing test cannot hang the others.
 struct Stall;
 
 impl Stall {
     fn on() -> Self {
         // SAFETY: the flag is the harness's own, behind a mutex.
-        unsafe { hf_host_stall_worker(true) };
+        unsafe { hf_host_stall_app_task(true) };
         Stall
     }
 }
@@ -1022,48 +1034,47 @@ impl Stall {
 impl Drop for Stall {
     fn drop(&mut self) {
         // SAFETY: as above.
-        unsafe { hf_host_stall_worker(false) };
+        unsafe { hf_host_stall_app_task(false) };
     }
 }
 
 #[test]
-fn a_late_step_gives_zero_output_until_the_worker_is_back() {
+fn the_step_runs_inline_and_a_stalled_swap_never_blocks_the_stabilizer() {
     let mut shim = Shim::new();
     shim.supervisor(true, true);
     let s = PlantState::at_rest(Vector3::new(0.0, 0.0, 0.5), 0.0);
     shim.set_state(&s);
     shim.set_setpoint([ABS; 4], [0.0, 0.0, 0.5], [0.0; 3], 0.0, 0.0, 0.0, false);
-    assert!(shim.tick()[0] > 0.0, "tick 0 flies");
-    shim.tick();
-
-    // The worker hangs after its step: the stabilizer gives up after 2 ticks (host ticks of
-    // 200 ms) and outputs zero.
+    // The step runs in the stabilizer's own call: with the app task hung, every executed tick
+    // still flies.
     let stall = Stall::on();
+    for _ in 0..6 {
+        let w = shim.tick();
+        if shim.tick % 2 == 1 {
+            assert!(w[0] > 0.0, "tick {} flies: {w:?}", shim.tick - 1);
+        }
+        assert_eq!(shim.log_u32("faults") & (NOT_READY | SWAPPING), 0);
+    }
+    // A revert on the ground hands the app task a swap it cannot take while hung: the
+    // stabilizer outputs zero at once and does not wait.
+    shim.set_param_u8("revert", 1);
     let t0 = Instant::now();
-    assert_eq!(shim.tick(), [0.0; 4], "tick 2: the step came back too late");
+    for _ in 0..20 {
+        assert_eq!(shim.tick(), [0.0; 4], "zero output while the swap waits");
+        assert_ne!(shim.log_u32("faults") & SWAPPING, 0);
+    }
     assert!(
-        t0.elapsed() >= Duration::from_millis(350),
-        "waited for the timeout"
+        t0.elapsed() < Duration::from_millis(200),
+        "20 ticks without waiting: {:?}",
+        t0.elapsed()
     );
-    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
-    shim.tick();
-    // Tick 4 hands over a step the hung worker cannot take: another timeout. From then on the
-    // worker owns the controller and the stabilizer does not wait any more.
-    assert_eq!(shim.tick(), [0.0; 4]);
-    let t1 = Instant::now();
-    assert_eq!(shim.tick(), [0.0; 4], "tick 5");
-    assert!(
-        t1.elapsed() < Duration::from_millis(100),
-        "no wait while the worker is busy"
-    );
-    assert_ne!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
-
-    // Back: the next executed tick flies again.
+    // Back: the swap runs, and the next executed tick flies again.
     drop(stall);
-    std::thread::sleep(Duration::from_millis(20));
+    shim.wait_for_swap();
+    shim.tick = 0;
     let w = shim.tick();
-    assert!(w[0] > 0.0, "tick 6 flies again: {w:?}");
-    assert_eq!(shim.log_u32("faults") & WORKER_TIMEOUT, 0);
+    assert!(w[0] > 0.0, "flies again after the swap: {w:?}");
+    assert_eq!(shim.log_u32("faults") & (NOT_READY | SWAPPING), 0);
 }
 
 /// The shipped blob with another vehicle mass (so its gains and force columns differ from the
@@ -1160,7 +1171,7 @@ fn an_out_of_order_repeated_upload_swaps_in_on_the_ground_and_reverts() {
     assert_eq!((info.state, info.staged_crc), (UP_PENDING, blob_crc(&blob)));
     assert_eq!(info.len as usize, blob.len());
     assert_eq!(info.source, 0, "not yet");
-    // The supervisor cannot fly (OFF): the next tick hands the swap to the worker.
+    // The supervisor cannot fly (OFF): the next tick hands the swap to the app task.
     shim.wait_for_swap();
     let info = shim.up_info();
     assert_eq!((info.state, info.source, info.error), (UP_ACTIVE, 1, 0));

@@ -101,19 +101,43 @@ impl LearnedModel {
     }
 
     /// J⁻¹(q) (1/(kg·m²)), body frame.
+    #[inline(never)]
     pub fn inertia_inv(&self, rot: &Matrix3<f32>) -> Matrix3<f32> {
         inertia_inv_from_l(&self.weights.inertia.forward(&rot_input(rot)))
     }
 
     /// g(q) ∈ ℝ⁶ˣ⁴ (rows body force then torque, columns u = [f; τ]).
     pub fn gain(&self, rot: &Matrix3<f32>) -> SMatrix<f32, 6, 4> {
-        gain_from_output(&self.weights.gain.forward(&rot_input(rot)))
+        let mut g = SMatrix::zeros();
+        self.write_gain(rot, &mut g);
+        g
+    }
+
+    /// [`LearnedModel::gain`] written into `g`.
+    #[inline(never)]
+    fn write_gain(&self, rot: &Matrix3<f32>, g: &mut SMatrix<f32, 6, 4>) {
+        write_gain_from_output(&self.weights.gain.forward(&rot_input(rot)), g);
     }
 
     /// W(q, 𝔭) ∈ ℝ⁶ˣᵖ at `state` (N, N·m per unit of a).
     pub fn features(&self, state: &State) -> SMatrix<f32, 6, FEATURES> {
-        let out = self.weights.disturbance.forward(&disturbance_input(state));
-        features_from_output(&state.rot, &out, self.weights.mass_kg)
+        let mut w = SMatrix::zeros();
+        self.write_features(state, &mut w);
+        w
+    }
+
+    /// [`LearnedModel::features`] written into `w`.
+    #[inline(never)]
+    fn write_features(&self, state: &State, w: &mut SMatrix<f32, 6, FEATURES>) {
+        // The head's row-major 6×p output goes straight into w's storage, which read
+        // column-major is its transpose (p = 6); transposed back in place, then scaled.
+        let x = disturbance_input(state);
+        let Ok(flat) = <&mut [f32; super::DIST_OUT]>::try_from(w.as_mut_slice()) else {
+            return;
+        };
+        self.weights.disturbance.forward_into(&x, flat);
+        w.transpose_mut();
+        scale_features(&state.rot, self.weights.mass_kg, w);
     }
 
     /// The J⁻¹ head with the two input Jacobians the dynamics need (paper eq. 1 and 2):
@@ -176,6 +200,16 @@ impl HamiltonianModel for LearnedModel {
             gain: self.gain(&state.rot),
             features: self.features(state),
         }
+    }
+
+    /// One head at a time, each out of line and written in place, so that only one head's
+    /// activations are on the stack at once.
+    fn write_terms(&self, state: &State, out: &mut ModelTerms) {
+        out.mass_kg = self.weights.mass_kg;
+        out.gravity_m_s2 = GRAVITY_M_S2;
+        out.inertia_inv = self.inertia_inv(&state.rot);
+        self.write_gain(&state.rot, &mut out.gain);
+        self.write_features(state, &mut out.features);
     }
 
     /// Paper eq. 1 and 2 with the learned J⁻¹(q): ∂H/∂rᵢ and d/dt J⁻¹ come from the network's
@@ -247,6 +281,12 @@ const GAIN_FACTOR: [[f32; 4]; 6] = {
 /// g from the gain head's output (row-major 6×4): g_ik = o_ik · (WRENCH_SCALEᵢ / CONTROL_SCALEₖ).
 pub fn gain_from_output(out: &[f32; GAIN_OUT]) -> SMatrix<f32, 6, 4> {
     let mut g = SMatrix::<f32, 6, 4>::zeros();
+    write_gain_from_output(out, &mut g);
+    g
+}
+
+/// [`gain_from_output`] written into `g`.
+fn write_gain_from_output(out: &[f32; GAIN_OUT], g: &mut SMatrix<f32, 6, 4>) {
     let rows = out.chunks_exact(4).zip(GAIN_FACTOR.iter()).enumerate();
     for (i, (row, factors)) in rows {
         for (k, (o, f)) in row.iter().zip(factors.iter()).enumerate() {
@@ -255,7 +295,6 @@ pub fn gain_from_output(out: &[f32; GAIN_OUT]) -> SMatrix<f32, 6, 4> {
             }
         }
     }
-    g
 }
 
 /// W from the feature head's output (row-major 6×p): column k = [m Rᵀ n_k; TORQUE_SCALE_NM t_k],
@@ -265,14 +304,32 @@ pub fn features_from_output(
     out: &[f32; super::DIST_OUT],
     mass_kg: f32,
 ) -> SMatrix<f32, 6, FEATURES> {
-    let o = SMatrix::<f32, 6, FEATURES>::from_row_slice(out);
-    let mut w = SMatrix::<f32, 6, FEATURES>::zeros();
-    let force_world = o.fixed_view::<3, FEATURES>(0, 0);
-    w.fixed_view_mut::<3, FEATURES>(0, 0)
-        .copy_from(&(rot.transpose() * force_world * mass_kg));
-    w.fixed_view_mut::<3, FEATURES>(3, 0)
-        .copy_from(&(o.fixed_view::<3, FEATURES>(3, 0) * TORQUE_SCALE_NM));
+    let mut w = SMatrix::zeros();
+    write_features_from_output(rot, out, mass_kg, &mut w);
     w
+}
+
+/// [`features_from_output`] written into `w`, one column at a time, with no temporary matrix.
+fn write_features_from_output(
+    rot: &Matrix3<f32>,
+    out: &[f32; super::DIST_OUT],
+    mass_kg: f32,
+    w: &mut SMatrix<f32, 6, FEATURES>,
+) {
+    *w = SMatrix::from_row_slice(out);
+    scale_features(rot, mass_kg, w);
+}
+
+/// The head's output (as a 6×p matrix) into W in place: force rows m Rᵀ n_k, torque rows
+/// TORQUE_SCALE_NM t_k.
+fn scale_features(rot: &Matrix3<f32>, mass_kg: f32, w: &mut SMatrix<f32, 6, FEATURES>) {
+    let rt = rot.transpose();
+    for mut col in w.column_iter_mut() {
+        let force = rt * col.fixed_rows::<3>(0) * mass_kg;
+        col.fixed_rows_mut::<3>(0).copy_from(&force);
+        let torque = col.fixed_rows::<3>(3) * TORQUE_SCALE_NM;
+        col.fixed_rows_mut::<3>(3).copy_from(&torque);
+    }
 }
 
 /// The output-layer bias that makes W equal the nominal features at initialization: feature k

@@ -48,11 +48,30 @@ pub struct ModelTerms {
     pub features: SMatrix<f32, 6, FEATURES>,
 }
 
+impl ModelTerms {
+    /// All zeros: the terms before a model was evaluated.
+    pub const ZERO: Self = Self {
+        mass_kg: 0.0,
+        gravity_m_s2: 0.0,
+        inertia_inv: Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        gain: SMatrix::<f32, 6, 4>::from_array_storage(nalgebra::ArrayStorage([[0.0; 6]; 4])),
+        features: SMatrix::<f32, 6, FEATURES>::from_array_storage(nalgebra::ArrayStorage(
+            [[0.0; 6]; FEATURES],
+        )),
+    };
+}
+
 /// A port-Hamiltonian model of the vehicle (paper eq. 1): learned
 /// or nominal ([`NominalModel`]). The controller is written against this trait.
 pub trait HamiltonianModel {
     /// M⁻¹, g and W at `state`.
     fn terms(&self, state: &State) -> ModelTerms;
+
+    /// [`HamiltonianModel::terms`] written into `out`: the controller keeps the terms of its
+    /// tick in place, so they need no room on the step's stack.
+    fn write_terms(&self, state: &State, out: &mut ModelTerms) {
+        *out = self.terms(state);
+    }
 
     /// The vehicle's mass m (kg): what the gains scale with ([`crate::Gains::for_mass_kg`]).
     fn mass_kg(&self) -> f32 {
@@ -81,6 +100,10 @@ pub trait HamiltonianModel {
 impl<M: HamiltonianModel + ?Sized> HamiltonianModel for &M {
     fn terms(&self, state: &State) -> ModelTerms {
         (**self).terms(state)
+    }
+
+    fn write_terms(&self, state: &State, out: &mut ModelTerms) {
+        (**self).write_terms(state, out)
     }
 
     fn mass_kg(&self) -> f32 {

@@ -5,7 +5,6 @@
  */
 #define _POSIX_C_SOURCE 200809L
 
-#include <errno.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdbool.h>
@@ -18,7 +17,6 @@
 #include "controller.h"
 #include "hf_host_registry.h"
 #include "mem.h"
-#include "semphr.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
 #include "supervisor.h"
@@ -38,9 +36,24 @@ char *pcTaskGetName(void *task) {
   return name;
 }
 
+/* hf_host_stall_app_task: while on, the app task (appMain's thread) does not come back from
+ * vTaskDelay, as a starved task would not. */
+static pthread_t appThread;
+static bool appStarted;
+static pthread_mutex_t stallMutex = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t stallCond = PTHREAD_COND_INITIALIZER;
+static bool stalled;
+
 void vTaskDelay(const TickType_t ticks) {
   const struct timespec ts = {(time_t)(ticks / 1000u), (long)(ticks % 1000u) * 1000000L};
   nanosleep(&ts, NULL);
+  if (appStarted && pthread_equal(pthread_self(), appThread)) {
+    pthread_mutex_lock(&stallMutex);
+    while (stalled) {
+      pthread_cond_wait(&stallCond, &stallMutex);
+    }
+    pthread_mutex_unlock(&stallMutex);
+  }
 }
 
 /* ---- the memory subsystem: the one handler the shim registers, driven as crtp_mem.c's
@@ -71,75 +84,24 @@ bool hf_host_mem_write(uint32_t addr, uint8_t len, const uint8_t *buffer) {
          memHandler->write(memHandler->internal_id, addr, len, buffer);
 }
 
-/* ---- FreeRTOS binary semaphores on pthreads, and the worker task ---- */
+/* ---- the app task ---- */
 
-static pthread_t workerThread;
-static bool workerStarted;
-static pthread_mutex_t stallMutex = PTHREAD_MUTEX_INITIALIZER;
-static pthread_cond_t stallCond = PTHREAD_COND_INITIALIZER;
-static bool stalled;
-
-SemaphoreHandle_t xSemaphoreCreateBinaryStatic(StaticSemaphore_t *buffer) {
-  pthread_mutex_init(&buffer->mutex, NULL);
-  pthread_cond_init(&buffer->cond, NULL);
-  buffer->given = false;
-  return buffer;
-}
-
-BaseType_t xSemaphoreGive(SemaphoreHandle_t sem) {
-  if (workerStarted && pthread_equal(pthread_self(), workerThread)) {
-    /* hf_host_stall_worker: the worker hangs before it reports a step done. */
-    pthread_mutex_lock(&stallMutex);
-    while (stalled) {
-      pthread_cond_wait(&stallCond, &stallMutex);
-    }
-    pthread_mutex_unlock(&stallMutex);
-  }
-  pthread_mutex_lock(&sem->mutex);
-  const bool was = sem->given;
-  sem->given = true;
-  pthread_cond_signal(&sem->cond);
-  pthread_mutex_unlock(&sem->mutex);
-  return was ? pdFALSE : pdTRUE;
-}
-
-BaseType_t xSemaphoreTake(SemaphoreHandle_t sem, TickType_t ticks) {
-  struct timespec until;
-  clock_gettime(CLOCK_REALTIME, &until);
-  const uint64_t ms = (uint64_t)ticks * HF_HOST_TICK_MS;
-  until.tv_sec += (time_t)(ms / 1000u);
-  until.tv_nsec += (long)(ms % 1000u) * 1000000L;
-  if (until.tv_nsec >= 1000000000L) {
-    until.tv_sec += 1;
-    until.tv_nsec -= 1000000000L;
-  }
-  pthread_mutex_lock(&sem->mutex);
-  int rc = 0;
-  while (!sem->given && ticks != 0 && rc != ETIMEDOUT) {
-    rc = (ticks == portMAX_DELAY) ? pthread_cond_wait(&sem->cond, &sem->mutex)
-                                  : pthread_cond_timedwait(&sem->cond, &sem->mutex, &until);
-  }
-  const bool got = sem->given;
-  sem->given = false;
-  pthread_mutex_unlock(&sem->mutex);
-  return got ? pdTRUE : pdFALSE;
-}
-
-static void *workerMain(void *arg) {
+static void *appTaskMain(void *arg) {
   (void)arg;
   appMain();
   return NULL;
 }
 
-/* Starts appMain (the shim's worker) in a thread, once per process. */
-void hf_host_start_worker(void) {
-  if (!workerStarted) {
-    workerStarted = pthread_create(&workerThread, NULL, workerMain, NULL) == 0;
+/* Starts appMain (the shim's app task: boot self test, model swaps) in a thread, once per
+ * process. */
+void hf_host_start_app_task(void) {
+  if (!appStarted) {
+    appStarted = pthread_create(&appThread, NULL, appTaskMain, NULL) == 0;
   }
 }
 
-/* While on, the worker hangs before reporting a step done (as a step that overruns would). */
-void hf_host_stall_worker(bool on) {
+/* While on, the app task hangs in its next vTaskDelay (a starved task). */
+void hf_host_stall_app_task(bool on) {
   pthread_mutex_lock(&stallMutex);
   stalled = on;
   pthread_cond_broadcast(&stallCond);

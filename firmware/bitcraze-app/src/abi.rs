@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 /// `HF_FEATURES`.
 pub const FEATURES: usize = hamflight::model::FEATURES;
 /// `HF_CONTROLLER_STORAGE_BYTES`.
-pub const CONTROLLER_STORAGE_BYTES: usize = 1024;
+pub const CONTROLLER_STORAGE_BYTES: usize = 1536;
 
 /// `HF_MODEL_STORAGE_BYTES`: an uploaded model's storage (the decoded networks, ~9.7 KB).
 pub const MODEL_STORAGE_BYTES: usize = 9696;

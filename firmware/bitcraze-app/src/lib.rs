@@ -25,8 +25,9 @@ extern crate std;
 pub mod abi;
 
 use abi::{HfBlobInfo, HfComposite, HfController, HfGains, HfModel, HfOutput, HfSetpoint, HfState};
+use hamflight::adapt::Measurement;
 use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
-use hamflight::{FlightController, Gains, Setpoint, State, VehicleFacts};
+use hamflight::{FlightController, Gains, Output, Setpoint, State, VehicleFacts};
 
 /// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
 pub mod model {
@@ -44,6 +45,28 @@ struct Inner {
     /// The faults of the last step.
     last_faults: u32,
     ctl: FlightController<&'static LearnedModel>,
+    /// The step's inputs and output in the core's types: converted here rather than on
+    /// `hf_step`'s stack, which the stabilizer task shares with Bitcraze's own code.
+    state: State,
+    setpoint: Setpoint,
+    meas: Measurement,
+    out: Output,
+}
+
+impl Inner {
+    /// The step's inputs in the core's types, converted in place. Out of line, so that the
+    /// conversion's temporaries are off the stack before the step runs.
+    #[inline(never)]
+    fn load_inputs(&mut self, state: &HfState, setpoint: &HfSetpoint) {
+        // The accelerometer reaches the composite adaptation law when the shim marks it valid
+        // (the paper's gradient law, the default, does not read it).
+        self.meas = Measurement {
+            acc_body_m_s2: (state.specific_force_valid != 0)
+                .then(|| nalgebra::Vector3::from(state.specific_force_body_m_s2)),
+        };
+        self.state = state.to_core();
+        self.setpoint = setpoint.to_core();
+    }
 }
 
 /// Marks a loaded, self-tested [`ModelInner`] ("HFMD").
@@ -108,6 +131,10 @@ pub unsafe extern "C" fn hf_init(ctl: *mut HfController) {
             &model::MODEL,
             Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
         ),
+        state: State::default(),
+        setpoint: Setpoint::default(),
+        meas: Measurement::default(),
+        out: Output::default(),
     };
     // SAFETY: non-null, writable and large and aligned enough (asserted above).
     unsafe { ctl.cast::<Inner>().write(inner) };
@@ -157,15 +184,15 @@ pub unsafe extern "C" fn hf_step(
     let (Some(inner), Some(state), Some(setpoint)) = (inner, state, setpoint) else {
         return abi::FAULT_NOT_INIT;
     };
-    // The accelerometer reaches the composite adaptation law when the shim marks it valid (the
-    // paper's gradient law, the default, does not read it).
-    let meas = hamflight::adapt::Measurement {
-        acc_body_m_s2: (state.specific_force_valid != 0)
-            .then(|| nalgebra::Vector3::from(state.specific_force_body_m_s2)),
-    };
-    let o = inner
-        .ctl
-        .step_measured(&state.to_core(), &setpoint.to_core(), &meas, dt_s);
+    inner.load_inputs(state, setpoint);
+    inner.ctl.step_into(
+        &inner.state,
+        &inner.setpoint,
+        &inner.meas,
+        dt_s,
+        &mut inner.out,
+    );
+    let o = &inner.out;
     let faults = abi::fault_bits(&o.faults);
     if !o.faults.is_fault() {
         // The command, not the law's wrench: it carries the motor-lag lead the attitude gains
