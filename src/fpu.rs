@@ -579,21 +579,8 @@ pub fn affine_into<const I: usize, const O: usize>(
 ) {
     #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
     if m4f_shape(I, O) {
-        let (wp, bp, xp, yp) = (
-            w.as_ptr().cast::<f32>(),
-            b.as_ptr(),
-            x.as_ptr(),
-            y.as_mut_ptr(),
-        );
-        // SAFETY: `w` is O contiguous rows of I f32, `b` and `y` hold O, `x` holds I, O is
-        // even and > 0.
-        unsafe {
-            if I == 16 {
-                m4f::rows16(wp, bp, xp, yp, O);
-            } else {
-                m4f::rows9(wp, bp, xp, yp, O);
-            }
-        }
+        // SAFETY: `y` holds O f32 and the shape is one the kernels take.
+        unsafe { m4f_layer::<I, O, false>(w, b, x, y.as_mut_ptr()) };
         return;
     }
     *y = layer::<I, O, false>(w, b, x);
@@ -621,22 +608,10 @@ fn layer<const I: usize, const O: usize, const ACT: bool>(
     #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
     if m4f_shape(I, O) {
         let mut y = core::mem::MaybeUninit::<[f32; O]>::uninit();
-        let (wp, bp, xp, yp) = (
-            w.as_ptr().cast::<f32>(),
-            b.as_ptr(),
-            x.as_ptr(),
-            y.as_mut_ptr().cast::<f32>(),
-        );
-        // SAFETY: `w` is O contiguous rows of I f32, `b` and `y` hold O, `x` holds I, O is
-        // even and > 0, the table holds the 11 constants; the kernel writes all O outputs, so
-        // `y` is initialized after it.
+        // SAFETY: `y` holds O f32 and the shape is one the kernels take; the kernel writes all
+        // O outputs, so `y` is initialized after it.
         unsafe {
-            match (ACT, I == 16) {
-                (true, true) => m4f::rows16_tanh(wp, bp, xp, yp, O, TANH_TABLE.as_ptr()),
-                (true, false) => m4f::rows9_tanh(wp, bp, xp, yp, O, TANH_TABLE.as_ptr()),
-                (false, true) => m4f::rows16(wp, bp, xp, yp, O),
-                (false, false) => m4f::rows9(wp, bp, xp, yp, O),
-            }
+            m4f_layer::<I, O, ACT>(w, b, x, y.as_mut_ptr().cast::<f32>());
             return y.assume_init();
         }
     }
@@ -646,6 +621,31 @@ fn layer<const I: usize, const O: usize, const ACT: bool>(
         return unsafe { layer_fma::<I, O, ACT>(w, b, x) };
     }
     layer_portable::<I, O, ACT>(w, b, x)
+}
+
+/// One layer on the M4F kernels (`ACT`: with tanh), written to `y`.
+///
+/// # Safety
+/// `y` is valid for writing O f32, and `m4f_shape(I, O)` holds.
+#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+#[inline(always)]
+unsafe fn m4f_layer<const I: usize, const O: usize, const ACT: bool>(
+    w: &[[f32; I]; O],
+    b: &[f32; O],
+    x: &[f32; I],
+    y: *mut f32,
+) {
+    let (wp, bp, xp) = (w.as_ptr().cast::<f32>(), b.as_ptr(), x.as_ptr());
+    // SAFETY: `w` is O contiguous rows of I f32, `b` holds O, `x` holds I, O is even and > 0
+    // (m4f_shape), the table holds the 11 constants; `y` by the caller's contract.
+    unsafe {
+        match (ACT, I == 16) {
+            (true, true) => m4f::rows16_tanh(wp, bp, xp, y, O, TANH_TABLE.as_ptr()),
+            (true, false) => m4f::rows9_tanh(wp, bp, xp, y, O, TANH_TABLE.as_ptr()),
+            (false, true) => m4f::rows16(wp, bp, xp, y, O),
+            (false, false) => m4f::rows9(wp, bp, xp, y, O),
+        }
+    }
 }
 
 /// The host's dense layers with the x86-64 FMA extension (`vfmadd`), picked at run time: the

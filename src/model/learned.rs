@@ -304,20 +304,9 @@ pub fn features_from_output(
     out: &[f32; super::DIST_OUT],
     mass_kg: f32,
 ) -> SMatrix<f32, 6, FEATURES> {
-    let mut w = SMatrix::zeros();
-    write_features_from_output(rot, out, mass_kg, &mut w);
+    let mut w = SMatrix::from_row_slice(out);
+    scale_features(rot, mass_kg, &mut w);
     w
-}
-
-/// [`features_from_output`] written into `w`, one column at a time, with no temporary matrix.
-fn write_features_from_output(
-    rot: &Matrix3<f32>,
-    out: &[f32; super::DIST_OUT],
-    mass_kg: f32,
-    w: &mut SMatrix<f32, 6, FEATURES>,
-) {
-    *w = SMatrix::from_row_slice(out);
-    scale_features(rot, mass_kg, w);
 }
 
 /// The head's output (as a 6×p matrix) into W in place: force rows m Rᵀ n_k, torque rows

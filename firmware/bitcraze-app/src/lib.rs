@@ -25,9 +25,8 @@ extern crate std;
 pub mod abi;
 
 use abi::{HfBlobInfo, HfComposite, HfController, HfGains, HfModel, HfOutput, HfSetpoint, HfState};
-use hamflight::adapt::Measurement;
 use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
-use hamflight::{FlightController, Gains, Output, Setpoint, State, VehicleFacts};
+use hamflight::{FlightController, Gains, Measurement, Output, Setpoint, State, VehicleFacts};
 
 /// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
 pub mod model {
