@@ -41,6 +41,9 @@ impl Overrides {
                 "trs" => g.composite.torque_rate_scale = *v,
                 "filter_tau" => g.composite.torque_filter_tau_s = *v,
                 "r_t" => g.composite.r_torque = *v,
+                "q_f" => g.composite.q_force = *v,
+                "r_f" => g.composite.r_force = *v,
+                "filter_f" => g.composite.filter_tau_s = *v,
                 "q" => {
                     g.composite.q_force = *v;
                     g.composite.q_torque = *v
@@ -228,7 +231,7 @@ fn main() -> anyhow::Result<()> {
                     .map_or("no".into(), |t| format!("at {t:.2} s")),
                 r.rmse_pos_window_m
                     .filter(|_| !r.crashed)
-                    .map_or("—".into(), |x| format!("{:.3}", 100.0 * x)),
+                    .map_or("—".into(), |x| format!("{:.4}", 100.0 * x)),
                 r.att_std_deg.map_or("—".into(), |x| format!("{x:.3}")),
                 100.0 * r.saturated_fraction,
                 norm(r.est_pos_bias_m),
