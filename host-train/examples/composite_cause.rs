@@ -10,6 +10,7 @@
 //! - `g: no torque→force`: the torque columns of the three force rows zeroed;
 //! - `g: thrust along z only`: both (the force rows take only thrust, along body z);
 //! - `J := true`: the J⁻¹ head replaced by the first scenario's true (constant, diagonal) J;
+//! - `J_z := true`: the same with the learned J_x, J_y at hover and the true J_z;
 //! - `J := true, g torque rows := true`: also g's torque rows set to the identity pattern;
 //! - `nominal, true m and J`: the nominal model told the true mass and inertia (the prediction's
 //!   row scaling for a non-stock vehicle, with an exact g).
@@ -109,11 +110,17 @@ fn main() -> anyhow::Result<()> {
         Some(s) => Vector3::from(Scenario::load(s)?.vehicle.inertia_kg_m2.map(|x| x as f32)),
         None => Vector3::new(1.4e-5, 1.4e-5, 2.17e-5),
     };
+    let j_learned = VehicleFacts::of(&model).inertia_kg_m2;
+    let j_learned_z_true = Vector3::new(j_learned.x, j_learned.y, j_true.z);
     let tau = model.motor_tau_s();
     let relag = |w: ModelWeights| LearnedModel::new(w).with_motor_tau_s(tau);
     let variants: Vec<(&str, LearnedModel)> = vec![
         ("as trained", model),
         ("J := true", relag(with_inertia(&w, &j_true))),
+        (
+            "J_z := true (J_x, J_y as learned)",
+            relag(with_inertia(&w, &j_learned_z_true)),
+        ),
         (
             "J := true, g torque rows := true",
             relag(with_true_torque_rows(&with_inertia(&w, &j_true))),
