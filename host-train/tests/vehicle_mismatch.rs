@@ -297,7 +297,7 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     // Under the composite law, learned reaches the floor: within 5 % of the nominal model told
     // the true mass, inertia and motor lag, on both spirals (full-size study: 0.99–1.00×). The
     // scenarios' measurement noise sets that floor (docs/vehicles.md, "What sets the floor").
-    assert_floor(&r, "heavy", &[calm.clone(), windy.clone()]);
+    assert_floor(&r, "heavy", &r.scenarios[..2]);
 
     // Without the noise the learning shows: learned + composite ≤ 0.7× nominal + composite with
     // the stock constants on the calm spiral (full-size study: 0.56×).
