@@ -143,6 +143,10 @@ pub struct CompositeGains {
     pub r_force: f32,
     /// Measurement variance R of the torque rows, per sample ((1e-3 N·m)²).
     pub r_torque: f32,
+    /// Per-axis factor on `r_torque` (body x, y, z), ones by default.
+    /// [`crate::control::Gains::for_vehicle`] sets it from the inertia so every axis's row has
+    /// the same noise ([`crate::control::VehicleFacts::torque_noise_scale`]).
+    pub r_torque_axis: [f32; 3],
     /// Process noise Q of the force columns of a (per second).
     pub q_force: f32,
     /// Process noise Q of the torque columns of a (per second).
@@ -187,6 +191,7 @@ impl Default for CompositeGains {
             torque_filter_tau_s: 0.01,
             r_force: 1.0,
             r_torque: 1.0,
+            r_torque_axis: [1.0; 3],
             q_force: 1.0,
             q_torque: 1.0,
             p0: 1.0,
@@ -578,8 +583,8 @@ impl Adaptation {
         // a ← a + k (z − h a), P ← P − k (P hᵀ)ᵀ, on P's upper triangle (`fpu::kalman_rows`);
         // the lower is mirrored from it below, so P stays exactly symmetric.
         let mut a = a0;
-        let (rf, rt) = (g.r_force, g.r_torque);
-        let mut s = [rf, rf, rf, rt, rt, rt];
+        let (rf, rt, [rx, ry, rz]) = (g.r_force, g.r_torque, g.r_torque_axis);
+        let mut s = [rf, rf, rf, rt * rx, rt * ry, rt * rz];
         crate::fpu::kalman_rows(p, &mut a, rows, zf, &mut s);
         if !crate::fpu::all_finite(s) {
             // A non-finite feature: no update of a this tick, and P starts again (the rows

@@ -61,6 +61,12 @@ pub struct Gains {
     pub k_r: f32,
     /// k_ω: angular damping (N·m·s/rad).
     pub k_w: f32,
+    /// Per-axis factor on k_R and k_ω (body x, y, z), ones by default. [`Gains::for_vehicle`]
+    /// sets it to each axis's inertia relative to the stock one's, over the design's: a model
+    /// learns J and the torque rows of g only up to a common factor per axis (J ω̇ = g_τ u + d
+    /// fits the data as well with both scaled), and with it the attitude loop the vehicle sees
+    /// is the same on every axis whichever split the model learned.
+    pub attitude_axis_scale: Vector3<f32>,
     /// Largest tilt of the desired thrust axis from world z (rad).
     pub max_tilt_rad: f32,
     /// Adaptation rates (paper eq. `geometric_adaptive_law`).
@@ -236,6 +242,36 @@ impl VehicleFacts {
     }
 }
 
+impl VehicleFacts {
+    /// Each axis's inertia relative to the stock vehicle's (J_i / J_stock,i), or `None` unless
+    /// all three are finite and positive.
+    fn inertia_ratio(&self) -> Option<Vector3<f32>> {
+        let stock = Self::default().inertia_kg_m2;
+        let r = self.inertia_kg_m2.component_div(&stock);
+        r.iter().all(|x| x.is_finite() && *x > 0.0).then_some(r)
+    }
+
+    /// [`Gains::attitude_axis_scale`]: J_i / J_stock,i over the ratio of the axis k_R and k_ω
+    /// are designed on (the smaller of x and y), so that k_R,i = J_stock,xy r_i ω_c² / a; ones
+    /// on the stock vehicle and on any vehicle whose inertia is the stock one scaled.
+    pub fn attitude_axis_scale(&self) -> Vector3<f32> {
+        match self.inertia_ratio() {
+            Some(r) => r / r.x.min(r.y),
+            None => Vector3::new(1.0, 1.0, 1.0),
+        }
+    }
+
+    /// [`crate::adapt::CompositeGains::r_torque_axis`]: (r_i / min(r_x, r_y))², with
+    /// r_i = J_i / J_stock,i. A torque row's noise is J_i times the gyro's, so its variance R
+    /// grows with J_i²: with this every axis's observer runs at the design axis's bandwidth
+    /// whichever split of J and g the model learned (ones on the stock vehicle and on any
+    /// uniformly scaled one).
+    pub fn torque_noise_scale(&self) -> [f32; 3] {
+        let s = self.attitude_axis_scale();
+        [s.x * s.x, s.y * s.y, s.z * s.z]
+    }
+}
+
 impl Gains {
     /// The gains for the vehicle `facts` describes: the translational gains of
     /// [`Gains::for_mass_kg`], and the attitude loop designed from the inertia and the motor lag.
@@ -273,6 +309,8 @@ impl Gains {
         if j.is_finite() && j > 0.0 {
             g.k_w = j * wc;
             g.k_r = j * wc * wc / ATTITUDE_SPACING;
+            g.attitude_axis_scale = facts.attitude_axis_scale();
+            g.composite.r_torque_axis = facts.torque_noise_scale();
         }
         g.rates.c_r *= TORQUE_ADAPTATION_SCALE;
         g.rates.c_w *= TORQUE_ADAPTATION_SCALE;
@@ -295,6 +333,7 @@ impl Gains {
             k_v: 8.0 * mass_kg,
             k_r: 0.015,
             k_w: 0.002,
+            attitude_axis_scale: Vector3::new(1.0, 1.0, 1.0),
             max_tilt_rad: 0.6,
             rates: AdaptationRates {
                 c_p: 800.0,
@@ -325,6 +364,7 @@ impl Gains {
             k_v: 0.0675,
             k_r: 1.0,
             k_w: 0.08,
+            attitude_axis_scale: Vector3::new(1.0, 1.0, 1.0),
             max_tilt_rad: 0.6,
             rates: AdaptationRates {
                 c_p: 0.04,
@@ -683,7 +723,8 @@ impl<M: HamiltonianModel> FlightController<M> {
         // Rotational law: b_ω (body frame).
         let p_w = inertia * w;
         let p_dot_des_w = -(inertia * w.cross(&w_des_body));
-        let b_w = w.cross(&p_w) - e_r * g.k_r + p_dot_des_w - e_w * g.k_w - wa_w;
+        let pd_w = (e_r * g.k_r + e_w * g.k_w).component_mul(&g.attitude_axis_scale);
+        let b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
         Demand {
             b_act: Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z),
             errors: TrackingError { e_p, e_v, e_r, e_w },

@@ -314,3 +314,135 @@ fn the_command_is_what_the_rotors_mix_and_carries_the_lag_lead() {
         "the command never differed from the law's wrench: no lead ({torque_lead_nm} N·m)"
     );
 }
+
+/// The stock nominal model with J and the torque rows of g and W scaled by `k` per axis: the
+/// same vehicle as data would show it (J ω̇ = g_τ u + W a fits as well with all three scaled).
+struct SplitModel {
+    inner: NominalModel,
+    k: Vector3<f32>,
+}
+
+impl HamiltonianModel for SplitModel {
+    fn terms(&self, state: &State) -> hamflight::model::ModelTerms {
+        let mut t = self.inner.terms(state);
+        let k_inv = Matrix3::from_diagonal(&self.k.map(|x| 1.0 / x));
+        t.inertia_inv = k_inv * t.inertia_inv;
+        for (i, ki) in self.k.iter().enumerate() {
+            t.gain.row_mut(3 + i).scale_mut(*ki);
+            t.features.row_mut(3 + i).scale_mut(*ki);
+        }
+        t
+    }
+}
+
+/// The thrusts the controller designed for `model` commands at rest with a small attitude
+/// error about every axis, without adaptation (`axis_scale`: keep the design's per-axis factor).
+fn split_thrusts<M: HamiltonianModel>(model: M, axis_scale: bool) -> [f32; 4] {
+    let mut g = Gains::for_vehicle(&hamflight::VehicleFacts::of(&model));
+    g.adapt = false;
+    if !axis_scale {
+        g.attitude_axis_scale = Vector3::new(1.0, 1.0, 1.0);
+    }
+    let mut fc = FlightController::new(model, g);
+    let (mut s, sp) = hover_pair();
+    s.rot = hamflight::lie::exp(&Vector3::new(0.04, -0.03, 0.05));
+    let out = fc.step(&s, &sp, 0.002);
+    assert!(!out.faults.is_fault(), "{:?}", out.faults);
+    out.rotors.thrust_n
+}
+
+/// Paper eq. (ida_pbc_control) on a learned model: the attitude loop the vehicle sees does not
+/// depend on how the model split its inertia and input gain per axis (k_R,i and k_ω,i scale
+/// with J_i, `Gains::attitude_axis_scale`), where one shared k_R sized on J_x would not.
+#[test]
+fn attitude_loop_is_invariant_to_the_split_of_j_and_g() {
+    let k = Vector3::new(0.9, 1.5, 3.0);
+    let stock = split_thrusts(NominalModel::default(), true);
+    let split = split_thrusts(
+        SplitModel {
+            inner: NominalModel::default(),
+            k,
+        },
+        true,
+    );
+    let shared = split_thrusts(
+        SplitModel {
+            inner: NominalModel::default(),
+            k,
+        },
+        false,
+    );
+    let diff = |a: &[f32; 4], b: &[f32; 4]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    // The attitude error's share of each rotor's thrust.
+    let hover = 0.027 * 9.81 / 4.0;
+    let spread = stock
+        .iter()
+        .map(|t| (t - hover).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        spread > 1e-3,
+        "the attitude error commands torque: {stock:?}"
+    );
+    assert!(
+        diff(&stock, &split) < 1e-3 * spread.max(1e-3) + 1e-6,
+        "per-axis split changed the thrusts: {stock:?} vs {split:?}"
+    );
+    assert!(
+        diff(&stock, &shared) > 0.1 * spread,
+        "a shared k_R should not be invariant: {stock:?} vs {shared:?}"
+    );
+}
+
+/// `Gains::for_vehicle`'s per-axis factors: ones on the stock vehicle and on a uniformly scaled
+/// one (whose gains scale through J_x), each axis's J_i over the design axis's otherwise, and
+/// the composite observer's torque noise with its square.
+#[test]
+fn per_axis_factors_follow_the_inertia() {
+    use hamflight::VehicleFacts;
+    let stock = VehicleFacts::default();
+    let ones = Vector3::new(1.0f32, 1.0, 1.0);
+    for s in [1.0f32, 1.3, 0.8] {
+        let facts = VehicleFacts {
+            inertia_kg_m2: stock.inertia_kg_m2 * s,
+            ..stock
+        };
+        let g = Gains::for_vehicle(&facts);
+        assert!((g.attitude_axis_scale - ones).amax() < 1e-6, "×{s}");
+        assert!(g
+            .composite
+            .r_torque_axis
+            .iter()
+            .all(|r| (r - 1.0).abs() < 1e-6));
+    }
+    assert_eq!(Gains::default().attitude_axis_scale, ones);
+    let split = VehicleFacts {
+        inertia_kg_m2: stock
+            .inertia_kg_m2
+            .component_mul(&Vector3::new(0.9, 1.5, 3.0)),
+        ..stock
+    };
+    let g = Gains::for_vehicle(&split);
+    let want = Vector3::new(1.0, 1.5 / 0.9, 3.0 / 0.9);
+    assert!(
+        (g.attitude_axis_scale - want).amax() < 1e-5,
+        "{:?}",
+        g.attitude_axis_scale
+    );
+    for (r, w) in g.composite.r_torque_axis.iter().zip(want.iter()) {
+        assert!((r - w * w).abs() < 1e-4, "{r} vs {}", w * w);
+    }
+    // k_R and k_ω themselves are sized on the smaller of J_x and J_y.
+    let wc = 1.0 / (3.0 * 0.011f32);
+    assert!((g.k_w - 0.9 * 1.4e-5 * wc).abs() < 1e-8, "k_w {}", g.k_w);
+    // A non-physical inertia keeps the shared gains.
+    let bad = VehicleFacts {
+        inertia_kg_m2: Vector3::new(1.4e-5, f32::NAN, 2.0e-5),
+        ..stock
+    };
+    assert_eq!(Gains::for_vehicle(&bad).attitude_axis_scale, ones);
+}

@@ -430,8 +430,10 @@ fn light_and_asym_vehicles_learn_and_fly_both_laws() {
     use host_train::control::baselines::Geometric;
     for vehicle in ["light", "asym"] {
         let out = tmpdir(vehicle);
+        // Every asym seed: its rotor loss was where a learned split of J and g cost most.
+        let seeds = if vehicle == "asym" { 3 } else { 1 };
         let args = VehicleStudyArgs {
-            seeds: 1,
+            seeds,
             no_lag_comparison: true,
             vehicle: vehicle.into(),
             ..VehicleStudyArgs::new(&out)
@@ -446,12 +448,16 @@ fn light_and_asym_vehicles_learn_and_fly_both_laws() {
         for sc in &r.scenarios {
             let nominal = one(&r, "geometric-adaptive-composite", sc);
             let learned = rmse(&r, "adaptive-composite", sc);
-            assert_eq!(learned.len(), 1, "{vehicle} {sc}");
-            assert!(
-                learned[0] <= nominal,
-                "{vehicle} {sc}: learned + composite {} vs nominal + composite {nominal}",
-                learned[0]
-            );
+            assert_eq!(learned.len() as u64, seeds, "{vehicle} {sc}");
+            // The rotor loss: at most 0.9× (measured 0.79–0.84× with the per-axis attitude
+            // gains, 0.96–1.002× with one k_R sized on J_x).
+            let bar = if sc.contains("rotor-loss") { 0.9 } else { 1.0 };
+            for l in &learned {
+                assert!(
+                    *l <= bar * nominal,
+                    "{vehicle} {sc}: learned + composite {l} vs {bar} × nominal + composite {nominal}"
+                );
+            }
         }
         assert_floor(&r, vehicle, &r.scenarios[..2]);
         let _ = std::fs::remove_dir_all(&out);

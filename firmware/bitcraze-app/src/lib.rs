@@ -232,12 +232,14 @@ pub unsafe extern "C" fn hf_set_gains(ctl: *mut HfController, gains: *const HfGa
     match gains.to_core(inner.ctl.gains.adapt) {
         Some(g) => {
             // The law and the composite law's tuning have their own calls, and the vehicle's
-            // lag compensation and velocity consistency are not in the C API: kept.
+            // lag compensation, per-axis attitude factor and velocity consistency are not in
+            // the C API: kept.
             let cur = &inner.ctl.gains;
             inner.ctl.gains = Gains {
                 law: cur.law,
                 composite: cur.composite,
                 lag: cur.lag,
+                attitude_axis_scale: cur.attitude_axis_scale,
                 velocity_consistency_tau_s: cur.velocity_consistency_tau_s,
                 ..g
             };
