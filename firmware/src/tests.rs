@@ -795,8 +795,13 @@ fn frame_sizes_fit_the_baud_budget() {
 #[test]
 fn setpoint_is_held_between_inputs_and_forgotten_on_a_watchdog_trip() {
     let mut l = ControlLoop::new(Ok(NominalModel::default()));
-    let mut reference =
-        hamflight::FlightController::new(NominalModel::default(), hamflight::Gains::default());
+    // The loop's own gains: those of the model's facts (its J comes back through J⁻¹, so the
+    // per-axis attitude factor is one only to rounding, and this compares bit for bit).
+    let facts = hamflight::VehicleFacts::of(&NominalModel::default());
+    let mut reference = hamflight::FlightController::new(
+        NominalModel::default(),
+        crate::control_loop::default_gains(&facts),
+    );
     let mut m = motors();
     let bare = |seq| Input {
         setpoint: None,
