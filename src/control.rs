@@ -253,10 +253,12 @@ impl VehicleFacts {
 
     /// [`Gains::attitude_axis_scale`]: J_i / J_stock,i over the ratio of the axis k_R and k_ω
     /// are designed on (the smaller of x and y), so that k_R,i = J_stock,xy r_i ω_c² / a; ones
-    /// on the stock vehicle and on any vehicle whose inertia is the stock one scaled.
+    /// on the stock vehicle and on any vehicle whose inertia is the stock one scaled. A factor
+    /// within 1e-5 of one (the rounding of a J that came back through J⁻¹) is one, so the
+    /// stock gains are bit for bit [`Gains::default`]'s whichever way J was read.
     pub fn attitude_axis_scale(&self) -> Vector3<f32> {
         match self.inertia_ratio() {
-            Some(r) => r / r.x.min(r.y),
+            Some(r) => (r / r.x.min(r.y)).map(|s| if (s - 1.0).abs() <= 1e-5 { 1.0 } else { s }),
             None => Vector3::new(1.0, 1.0, 1.0),
         }
     }
