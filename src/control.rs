@@ -240,9 +240,7 @@ impl VehicleFacts {
             },
         }
     }
-}
 
-impl VehicleFacts {
     /// Each axis's inertia relative to the stock vehicle's (J_i / J_stock,i), or `None` unless
     /// all three are finite and positive.
     fn inertia_ratio(&self) -> Option<Vector3<f32>> {
