@@ -28,6 +28,11 @@ enum Command {
     /// the learned model, the nominal model with the vehicle's constants, and the hold and
     /// zero-order baselines; prints a table, writes DIR/score.json and DIR/score.svg.
     Score(host_train::pipeline::score::ScoreArgs),
+    /// Fit a blob's measured-input response on a dataset: the torques' effective gain and lag,
+    /// a body acceleration linear in the body velocity and a constant one, what a real log's
+    /// measured rotor speeds need beyond the blob's rigid body; writes FILE.json for
+    /// `score --response`.
+    FitResponse(host_train::pipeline::fit_response::FitResponseArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
@@ -75,6 +80,23 @@ fn run(cli: Cli) -> Result<()> {
                 "{}",
                 host_train::fly::margins::table(&args.scenario.display().to_string(), &rows)
             );
+        }
+        Command::FitResponse(args) => {
+            let r = host_train::pipeline::fit_response::run(&args)?;
+            let at = |e: &host_train::train::predict::HorizonErrors| {
+                let last = r.horizon.saturating_sub(1);
+                format!(
+                    "pos {:.4} m, vel {:.3} m/s, att {:.3} rad, rates {:.3} rad/s",
+                    e.pos_mae_m.get(last).copied().unwrap_or(f64::NAN),
+                    e.vel_mae_m_s.get(last).copied().unwrap_or(f64::NAN),
+                    e.att_mae_rad.get(last).copied().unwrap_or(f64::NAN),
+                    e.rate_mae_rad_s.get(last).copied().unwrap_or(f64::NAN)
+                )
+            };
+            println!("MAE at {} steps on the fitted windows:", r.horizon);
+            println!("  blob alone     {}", at(&r.errors_blob));
+            println!("  with response  {}", at(&r.errors_fitted));
+            println!("wrote {} in {:.1} s", args.out.display(), r.elapsed_s);
         }
         Command::Score(args) => {
             let s = host_train::pipeline::score::run(&args)?;

@@ -69,6 +69,7 @@ fn score_reproduces_the_training_reports_heldout_errors() {
         stride: 4,
         vehicle: Some(vf),
         out: Some(dir.join("score")),
+        response: None,
     };
     let s = score::run(&args).expect("scores");
     assert_eq!(s.windows, windows.windows.len());

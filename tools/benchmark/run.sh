@@ -14,7 +14,9 @@
 #   WINDOW_LEN        training window, states [11]
 #   STRIDE            training window stride [2]
 #   SEED              [0]
-# WORK_DIR (outside the repository) gets csv/, dataset/, test-dataset/, model.hfw, score/,
+# WORK_DIR (outside the repository) gets csv/, dataset/, train-raw/, test-dataset/,
+# protocol-dataset/, model.hfw (free rotation), pinned.hfw (rotation pinned to the vehicle
+# description: the blob that flies), response.json (its measured-input response), score*/,
 # reference_score*.json and the logs. Nothing is written into the repository.
 set -euo pipefail
 
@@ -66,13 +68,31 @@ echo "== 3. import (train runs, and the melon test runs as a second dataset)"
     --keep-repeated-states --trim-s 0 --min-height-m=-100 --min-thrust-frac 0 --max-gap-s 1 \
     --out "$work/protocol-dataset" "$work"/csv/test/*.csv 2>&1 | tee "$work/import-protocol.log"
 
+# The training flights with every state kept, for the response fit's 51-state windows.
+"$HT" import --vehicle "$work/csv/vehicle.toml" --motor-poles 12 --format csv \
+    --keep-repeated-states --trim-s 0 --min-height-m=-100 --min-thrust-frac 0 --max-gap-s 1 \
+    --out "$work/train-raw" "$work"/csv/train/*.csv 2>&1 | tee "$work/import-train-raw.log"
+
 echo "== 4. train"
 # --no-flight-check: the trainer's SITL flight check (adaptive law, windy spiral) crashes on the
 # models learned from these flights; the benchmark scores predictions, not the controller.
 "$HT" train --data "$work/dataset" --out "$work/model.hfw" --epochs "$EPOCHS" --seed "$SEED" \
     --window-len "$WINDOW_LEN" --stride "$STRIDE" --no-flight-check 2>&1 | tee "$work/train.log"
 
+echo "== 4b. train with the rotation pinned (J, g's torque part from vehicle.toml; WITH the flight check)"
+# The flight check runs here: this is the blob that flies, with the real mass, under both laws.
+"$HT" train --data "$work/dataset" --out "$work/pinned.hfw" --epochs "$EPOCHS" --seed "$SEED" \
+    --window-len "$WINDOW_LEN" --stride "$STRIDE" --pin-rotation --no-flight-rotor-gains \
+    2>&1 | tee "$work/train-pinned.log"
+
+echo "== 4c. fit the pinned blob's measured-input response on the training flights (about 90 s)"
+"$HT" fit-response --weights "$work/pinned.hfw" --data "$work/train-raw" --horizon 50 \
+    --out "$work/response.json" 2>&1 | tee "$work/fit-response.log"
+
 echo "== 5. score (held-out melon runs) and the Python check on the same windows"
+"$HT" score --weights "$work/pinned.hfw" --response "$work/response.json" \
+    --data "$work/protocol-dataset" --horizon 50 \
+    --out "$work/score-pinned" 2>&1 | tee "$work/score-pinned.log"
 "$HT" score --weights "$work/model.hfw" --data "$work/protocol-dataset" --horizon 50 \
     --out "$work/score-protocol" 2>&1 | tee "$work/score-protocol.log"
 "$HT" score --weights "$work/model.hfw" --data "$work/test-dataset" --horizon 50 \
@@ -80,6 +100,7 @@ echo "== 5. score (held-out melon runs) and the Python check on the same windows
 "$PY" "$here/reference_score.py" --dataset "$work/test-dataset" \
     --out "$work/reference_score_dataset.json" | tee "$work/reference_score_dataset.log"
 
-echo "== done: $work/score/score.json (host-train score on the imported test flights),"
+echo "== done: $work/score-pinned/score.json (the protocol's windows; row learned+response),"
+echo "   $work/score/score.json (host-train score on the imported test flights),"
 echo "   $work/reference_score_dataset.json (Python, the same windows),"
 echo "   $work/reference_score.json (Python, the benchmark protocol on the raw test CSVs)"

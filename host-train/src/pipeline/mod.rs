@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod check;
 pub mod demo;
+pub mod fit_response;
 pub mod score;
 pub mod train;
 pub mod vehicle_study;

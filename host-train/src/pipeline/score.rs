@@ -57,6 +57,10 @@ pub struct ScoreArgs {
     /// Write DIR/score.json and DIR/score.svg.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// A measured-input response (`host-train fit-response`'s FILE.json): adds the row
+    /// `learned+response`, the blob with the response's torque gain and lag and velocity term.
+    #[arg(long, value_name = "FILE.json")]
+    pub response: Option<PathBuf>,
 }
 
 /// One predictor's row.
@@ -172,7 +176,7 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         Matrix3::from_diagonal(&Vector3::from(j.map(|x| x as f32))),
     );
     let ids: Vec<usize> = (0..data.windows.len()).collect();
-    let score = Score {
+    let mut score = Score {
         weights: args.weights.display().to_string(),
         data: args.data.display().to_string(),
         windows: ids.len(),
@@ -182,6 +186,16 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         nominal_inertia_kg_m2: j,
         predictors: score_windows(&model, &nominal, &data, &ids),
     };
+    if let Some(path) = &args.response {
+        let response = crate::pipeline::fit_response::load_response(path)?;
+        score.predictors.insert(
+            1,
+            PredictorScore {
+                name: "learned+response".into(),
+                errors: crate::train::response::response_errors(&model, &response, &data, &ids),
+            },
+        );
+    }
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create `{}`", dir.display()))?;

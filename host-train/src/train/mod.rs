@@ -36,6 +36,7 @@ pub mod fused;
 #[path = "loop.rs"]
 pub mod r#loop;
 pub mod predict;
+pub mod response;
 pub mod tensor_model;
 
 use anyhow::{bail, Result};
@@ -137,6 +138,13 @@ pub struct TrainConfig {
     /// does, and trained freely they take up large spurious entries (see `docs/vehicles.md`).
     /// Held at zero during training instead, the rest of the model fits worse (measured there).
     pub zero_unactuated_gain_rows: bool,
+    /// Keep the rotational physics at the vehicle description's (default false): J⁻¹ stays the
+    /// prior's (the described inertia) and g's torque rows and the thrust row's torque columns
+    /// stay the true mixer's, so only the thrust gain, W and the a_j are learned. For logs whose
+    /// measured rotor speeds cannot identify the torque effectiveness (docs/benchmark.md: the
+    /// nano-drone flights see 2–4 % of it through a 0.2 s lag); what those logs do identify of
+    /// the rotation goes into a measured-input response ([`response`]) for prediction.
+    pub pin_rotation: bool,
     /// Where the loss's gradient comes from (default [`GradientPath::Fused`], or
     /// [`GradientPath::Burn`] when `HAMFLIGHT_TRAIN_BURN` overrides it: [`GradientPath::from_env`]).
     pub gradient: GradientPath,
@@ -166,6 +174,7 @@ impl Default for TrainConfig {
             flight_check: true,
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
+            pin_rotation: false,
             gradient: GradientPath::from_env().unwrap_or_default(),
         }
     }
@@ -231,6 +240,10 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     to_hover_feature_basis(&mut trained);
     if cfg.zero_unactuated_gain_rows {
         trained.weights = r#loop::with_unactuated_gain_rows_zeroed(&trained.weights);
+    }
+    if cfg.pin_rotation {
+        trained.weights =
+            r#loop::with_rotation_pinned(&trained.weights, &r#loop::prior_of(&windows));
     }
     let tau = blob_motor_tau_s(cfg, &windows.vehicle)?;
     let model = hamflight::model::LearnedModel::new(trained.weights).with_motor_tau_s(tau);
@@ -350,6 +363,12 @@ pub struct TrainArgs {
     /// prediction turns into force errors at every attitude manoeuvre.
     #[arg(long)]
     pub free_gain: bool,
+    /// Keep J and the torque part of g at the vehicle description's (the prior): learn only the
+    /// thrust gain and the disturbance features. For real logs whose rotor speeds do not
+    /// identify the torque effectiveness (the nano-drone benchmark); fit what they do show of
+    /// the rotation with `host-train fit-response`.
+    #[arg(long)]
+    pub pin_rotation: bool,
     /// Where the loss's gradient comes from: `fused` (the hand-fused kernel) or `burn` (burn's
     /// autodiff, the reference). Default: fused, or burn when `HAMFLIGHT_TRAIN_BURN=1`.
     #[arg(long, value_enum, value_name = "PATH")]
@@ -385,6 +404,7 @@ impl TrainArgs {
             flight_check: !self.no_flight_check,
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
+            pin_rotation: self.pin_rotation,
             gradient: self
                 .gradient
                 .unwrap_or_else(|| TrainConfig::default().gradient),

@@ -1,0 +1,478 @@
+//! The measured-input response: what a real log's measured rotor speeds and body velocity do to
+//! the motion that a blob's rigid body (paper eq. 1 and 2) does not say, for open-loop prediction.
+//!
+//! A blob's model maps a wrench u = [f; τ] to the motion. On a log whose wrench comes from
+//! measured rotor speeds (the nano-drone benchmark, docs/benchmark.md), three things sit between
+//! the computed wrench and the motion that the paper's M, g and W cannot hold:
+//! - the speeds' own filtering: the torques act through a first-order lag `torque_lag_s` and with
+//!   an effective gain `torque_gain` per axis (the benchmark's rotor telemetry shows 2–8 % of the
+//!   torque the rigid body needs, 0.2 s late); the thrust has its own gain `thrust_gain`;
+//! - a body wrench linear in the body velocity ζ = (v, ω), the rotors' drag and flapping
+//!   moment and the rate damping, written as an acceleration A ζ (`accel_per_velocity`);
+//! - a constant body acceleration c (`accel_bias`): a centre-of-mass offset, a trim torque.
+//!
+//! So the predicted motion is the blob's dynamics under u' = [k_f f; k_τ ∘ τ̄] with
+//! τ̄̇ = (τ − τ̄)/T (backward Euler at the log's rate), plus ζ̇ += A ζ + c. With the identity response ([`Response::identity`]) it is
+//! the blob's own prediction. The response is host-side: the flight core's control path does not
+//! use it (the controller flies the blob's M, g and W; docs/benchmark.md says why).
+//!
+//! [`fit`] identifies the response on a dataset by Levenberg–Marquardt on multi-step rollouts.
+
+use hamflight::lie;
+use hamflight::model::{rk4_step, HamiltonianModel, ModelTerms, State, StateDerivative, FEATURES};
+use nalgebra::{DMatrix, DVector, Vector3, Vector4};
+use serde::{Deserialize, Serialize};
+
+use super::data::Windows;
+use super::predict::{Acc, HorizonErrors};
+
+/// The measured-input response (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Response {
+    /// k_f: the thrust's effective gain (1: as computed).
+    pub thrust_gain: f32,
+    /// k_τ: each body torque's effective gain (roll, pitch, yaw; 1: as computed).
+    pub torque_gain: [f32; 3],
+    /// T (s): the first-order lag the torques act through (0: none).
+    pub torque_lag_s: f32,
+    /// A: body-frame acceleration per unit of ζ = (v (m/s), ω (rad/s)), row-major 6×6: rows
+    /// v̇ (m/s²) then ω̇ (rad/s²).
+    pub accel_per_velocity: [[f32; 6]; 6],
+    /// c: constant body-frame acceleration, v̇ (m/s²) then ω̇ (rad/s²).
+    pub accel_bias: [f32; 6],
+}
+
+impl Default for Response {
+    fn default() -> Self {
+        Self::identity()
+    }
+}
+
+/// Number of parameters: k_f, k_τ (3), T, A (36), c (6).
+pub const PARAMS: usize = 47;
+
+/// Parameters [`fit`] leaves where they start: the constant body force (c's v̇ part), which a
+/// fit trades against the thrust gain (on the nano-drone flights it took 8 m/s² of the 9.8 and
+/// left the thrust gain at 0.24); a quadrotor's constant force is its thrust's.
+const FIXED: [usize; 3] = [41, 42, 43];
+
+impl Response {
+    /// The blob's own prediction: unit gains, no lag, no velocity term.
+    pub fn identity() -> Self {
+        Self {
+            thrust_gain: 1.0,
+            torque_gain: [1.0; 3],
+            torque_lag_s: 0.0,
+            accel_per_velocity: [[0.0; 6]; 6],
+            accel_bias: [0.0; 6],
+        }
+    }
+
+    /// The parameters as one vector in [`PARAMS`] order.
+    pub fn to_params(&self) -> [f64; PARAMS] {
+        let mut p = [0.0; PARAMS];
+        let flat = [self.thrust_gain]
+            .into_iter()
+            .chain(self.torque_gain)
+            .chain([self.torque_lag_s])
+            .chain(self.accel_per_velocity.into_iter().flatten())
+            .chain(self.accel_bias);
+        for (o, v) in p.iter_mut().zip(flat) {
+            *o = f64::from(v);
+        }
+        p
+    }
+
+    /// The response of a parameter vector ([`Response::to_params`]'s order); the lag is
+    /// clamped to ≥ 0.
+    pub fn from_params(p: &[f64; PARAMS]) -> Self {
+        let mut r = Self::identity();
+        let mut it = p.iter().map(|&v| v as f32);
+        let mut next = || it.next().unwrap_or(0.0);
+        r.thrust_gain = next();
+        r.torque_gain = [next(), next(), next()];
+        r.torque_lag_s = next().max(0.0);
+        for row in r.accel_per_velocity.iter_mut() {
+            for v in row.iter_mut() {
+                *v = next();
+            }
+        }
+        for v in r.accel_bias.iter_mut() {
+            *v = next();
+        }
+        r
+    }
+
+    /// True if every number is finite.
+    pub fn is_finite(&self) -> bool {
+        self.to_params().iter().all(|v| v.is_finite())
+    }
+}
+
+/// A blob's model with the response's velocity term added to its dynamics (the input part is
+/// applied by [`rollout`]).
+struct WithVelocityTerm<'a, M> {
+    base: &'a M,
+    response: &'a Response,
+}
+
+impl<M: HamiltonianModel> HamiltonianModel for WithVelocityTerm<'_, M> {
+    fn terms(&self, state: &State) -> ModelTerms {
+        self.base.terms(state)
+    }
+
+    fn mass_kg(&self) -> f32 {
+        self.base.mass_kg()
+    }
+
+    fn motor_tau_s(&self) -> f32 {
+        self.base.motor_tau_s()
+    }
+
+    fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {
+        let mut d = self.base.dynamics(state, u, a);
+        let z = [
+            state.v_body_m_s.x,
+            state.v_body_m_s.y,
+            state.v_body_m_s.z,
+            state.w_body_rad_s.x,
+            state.w_body_rad_s.y,
+            state.w_body_rad_s.z,
+        ];
+        let r = self.response;
+        let mut acc = [0.0f32; 6];
+        for ((o, row), c) in acc.iter_mut().zip(&r.accel_per_velocity).zip(&r.accel_bias) {
+            *o = row.iter().zip(&z).map(|(a, b)| a * b).sum::<f32>() + c;
+        }
+        d.v_dot_m_s2 += Vector3::new(acc[0], acc[1], acc[2]);
+        d.w_dot_rad_s2 += Vector3::new(acc[3], acc[4], acc[5]);
+        d
+    }
+}
+
+/// Rolls `base` with `response` out from `s0` under the logged wrenches `u` (one per step of
+/// `dt_s`, RK4 as training integrates, a = 0), calling `visit(k, state)` after step k. Stops
+/// early if the state stops being finite.
+pub fn rollout<M: HamiltonianModel>(
+    base: &M,
+    response: &Response,
+    s0: &State,
+    u: &[[f32; 4]],
+    dt_s: f32,
+    mut visit: impl FnMut(usize, &State),
+) {
+    let model = WithVelocityTerm { base, response };
+    // The lag discretized by backward Euler, τ̄ₖ = (T τ̄ₖ₋₁ + dt τₖ) / (T + dt): unlike
+    // exp(−dt/T), its pole moves at T = 0, so a fit that reaches T = 0 can leave it again.
+    let lag = response.torque_lag_s.max(0.0);
+    let alpha = if lag + dt_s > 0.0 {
+        lag / (lag + dt_s)
+    } else {
+        0.0
+    };
+    let mut tau = u.first().map_or([0.0; 3], |u0| [u0[1], u0[2], u0[3]]);
+    let mut s = *s0;
+    for (k, uk) in u.iter().enumerate() {
+        for (t, &x) in tau.iter_mut().zip(&uk[1..]) {
+            *t = alpha * *t + (1.0 - alpha) * x;
+        }
+        let ue = Vector4::new(
+            response.thrust_gain * uk[0],
+            response.torque_gain[0] * tau[0],
+            response.torque_gain[1] * tau[1],
+            response.torque_gain[2] * tau[2],
+        );
+        s = rk4_step(&model, &s, &ue, &[0.0; FEATURES], dt_s);
+        if !s.is_finite() {
+            return;
+        }
+        visit(k, &s);
+    }
+}
+
+/// Errors of `base` with `response` (a = 0) over windows `ids` of `data`: the `score` row.
+pub fn response_errors<M: HamiltonianModel>(
+    base: &M,
+    response: &Response,
+    data: &Windows,
+    ids: &[usize],
+) -> HorizonErrors {
+    let dt = 1.0 / data.sample_hz;
+    let n = data.window_len.saturating_sub(1);
+    let mut acc = Acc::new(n);
+    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
+        let Some(s0) = w.states.first() else { continue };
+        let u = w.u.get(..n).unwrap_or(&w.u);
+        let mut last = (0, *s0);
+        rollout(base, response, s0, u, dt, |k, s| {
+            if let Some(t) = w.states.get(k + 1) {
+                acc.add(k, s, t);
+            }
+            last = (k + 1, *s);
+        });
+        // A rollout that diverged counts with its last finite state at every later step, so
+        // that a diverging response scores badly instead of dropping its worst windows.
+        for k in last.0..n {
+            if let Some(t) = w.states.get(k + 1) {
+                acc.add(k, &last.1, t);
+            }
+        }
+        acc.n += 1;
+    }
+    acc.finish()
+}
+
+/// What [`fit`] is told.
+#[derive(Clone, Debug)]
+pub struct FitConfig {
+    /// Levenberg–Marquardt iterations at most.
+    pub iterations: usize,
+    /// The error scales (m, m/s, rad, rad/s) that make position, velocity, attitude and rate
+    /// residuals comparable.
+    pub scales: [f64; 4],
+    /// Threads for the finite-difference Jacobian.
+    pub threads: usize,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 20,
+            scales: [0.1, 0.5, 0.2, 0.6],
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        }
+    }
+}
+
+/// One fit iteration, for progress and the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct FitStep {
+    /// Iteration (0: the start).
+    pub iteration: usize,
+    /// The mean squared scaled residual.
+    pub cost: f64,
+    /// LM's damping λ after the iteration.
+    pub lambda: f64,
+}
+
+/// The horizons (steps) whose errors the fit's residuals hold, for windows of `n` steps.
+fn residual_steps(n: usize) -> Vec<usize> {
+    let mut s: Vec<usize> = [1, 2, 5, 10, 20, 30, 40, 50]
+        .into_iter()
+        .filter(|&k| k <= n)
+        .collect();
+    if s.last() != Some(&n) && n > 0 {
+        s.push(n);
+    }
+    s
+}
+
+/// The scaled residuals of `p` over windows `ids`: for every window and every step of
+/// [`residual_steps`], 12 numbers (position, world velocity, attitude log, rates). A diverged
+/// rollout gives non-finite residuals.
+fn residuals<M: HamiltonianModel>(
+    base: &M,
+    p: &[f64; PARAMS],
+    data: &Windows,
+    ids: &[usize],
+    scales: &[f64; 4],
+) -> Vec<f64> {
+    let response = Response::from_params(p);
+    let dt = 1.0 / data.sample_hz;
+    let n = data.window_len.saturating_sub(1);
+    let steps = residual_steps(n);
+    let mut out = Vec::with_capacity(ids.len() * steps.len() * 12);
+    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
+        let Some(s0) = w.states.first() else { continue };
+        let u = w.u.get(..n).unwrap_or(&w.u);
+        let mut at = vec![None; n];
+        rollout(base, &response, s0, u, dt, |k, s| {
+            if let Some(slot) = at.get_mut(k) {
+                *slot = Some(*s);
+            }
+        });
+        for &k in &steps {
+            let (Some(Some(pred)), Some(truth)) = (at.get(k - 1), w.states.get(k)) else {
+                out.extend([f64::NAN; 12]);
+                continue;
+            };
+            let dp = pred.p_m - truth.p_m;
+            let dv = pred.rot * pred.v_body_m_s - truth.rot * truth.v_body_m_s;
+            let da = lie::log(&(truth.rot.transpose() * pred.rot));
+            let dw = pred.w_body_rad_s - truth.w_body_rad_s;
+            for (v, s) in [
+                (dp, scales[0]),
+                (dv, scales[1]),
+                (da, scales[2]),
+                (dw, scales[3]),
+            ] {
+                out.extend(v.iter().map(|&x| f64::from(x) / s));
+            }
+        }
+    }
+    out
+}
+
+/// δ of the pseudo-Huber cost √(‖r‖² + δ²) − δ (scaled units): quadratic below, the norm above.
+const ROBUST_DELTA: f64 = 0.05;
+
+/// The fit's objective: the mean over residual triples of the pseudo-Huber √(‖r‖² + δ²) − δ,
+/// the benchmark's metric (mean error norm, in scaled units) for errors above δ and smooth
+/// below. Infinite if a rollout diverged.
+fn cost(r: &[f64]) -> f64 {
+    if !r.iter().all(|v| v.is_finite()) {
+        return f64::INFINITY;
+    }
+    let groups = r.chunks(3);
+    let n = groups.len().max(1) as f64;
+    groups
+        .map(|g| {
+            (g.iter().map(|v| v * v).sum::<f64>() + ROBUST_DELTA.powi(2)).sqrt() - ROBUST_DELTA
+        })
+        .sum::<f64>()
+        / n
+}
+
+/// The IRLS row weights (‖r_g‖² + δ²)^(−1/4) of each residual triple: the weighted least
+/// squares' gradient is [`cost`]'s at the current point.
+fn irls_weights(r: &[f64]) -> Vec<f64> {
+    r.chunks(3)
+        .flat_map(|g| {
+            let n2 = g.iter().map(|v| v * v).sum::<f64>();
+            let w = (n2 + ROBUST_DELTA.powi(2)).powf(-0.25);
+            std::iter::repeat_n(w, g.len())
+        })
+        .collect()
+}
+
+/// Fits the response to windows `ids` of `data` from `start`, by Levenberg–Marquardt with a
+/// forward-difference Jacobian on `cfg.threads` threads. `progress` sees every iteration. Returns
+/// the best response found and the iterations.
+pub fn fit<M: HamiltonianModel + Sync>(
+    base: &M,
+    data: &Windows,
+    ids: &[usize],
+    start: &Response,
+    cfg: &FitConfig,
+    mut progress: impl FnMut(&FitStep),
+) -> (Response, Vec<FitStep>) {
+    let mut p = start.to_params();
+    let mut r = residuals(base, &p, data, ids, &cfg.scales);
+    let mut c = cost(&r);
+    let mut lambda = 1e-2;
+    let mut steps = vec![FitStep {
+        iteration: 0,
+        cost: c,
+        lambda,
+    }];
+    progress(&steps[0]);
+    if !c.is_finite() || r.is_empty() {
+        return (Response::from_params(&p), steps);
+    }
+    for iteration in 1..=cfg.iterations {
+        let mut jac = jacobian(base, &p, &r, data, ids, cfg);
+        let w = irls_weights(&r);
+        for (mut row, wi) in jac.row_iter_mut().zip(&w) {
+            row *= *wi;
+        }
+        let rw: Vec<f64> = r.iter().zip(&w).map(|(a, b)| a * b).collect();
+        let jt_j = jac.transpose() * &jac;
+        let jt_r = jac.transpose() * DVector::from_column_slice(&rw);
+        let mut improved = false;
+        let mut converged = false;
+        for _ in 0..8 {
+            let mut a = jt_j.clone();
+            for i in 0..PARAMS {
+                a[(i, i)] += lambda * (jt_j[(i, i)] + 1e-9);
+            }
+            let Some(delta) = a.cholesky().map(|ch| ch.solve(&(-&jt_r))) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut q = p;
+            for (qi, d) in q.iter_mut().zip(delta.iter()) {
+                *qi += d;
+            }
+            q[4] = q[4].max(0.0);
+            let rq = residuals(base, &q, data, ids, &cfg.scales);
+            let cq = cost(&rq);
+            if cq < c {
+                let gain = (c - cq) / c;
+                (p, r, c) = (q, rq, cq);
+                converged = gain < 1e-4;
+                lambda = (lambda / 3.0).max(1e-7);
+                improved = true;
+                break;
+            }
+            lambda *= 4.0;
+        }
+        let step = FitStep {
+            iteration,
+            cost: c,
+            lambda,
+        };
+        progress(&step);
+        steps.push(step);
+        if !improved || converged {
+            break;
+        }
+    }
+    (Response::from_params(&p), steps)
+}
+
+/// The forward-difference Jacobian of [`residuals`] at `p` (with `r` its value there), its
+/// columns split over `cfg.threads` threads.
+fn jacobian<M: HamiltonianModel + Sync>(
+    base: &M,
+    p: &[f64; PARAMS],
+    r: &[f64],
+    data: &Windows,
+    ids: &[usize],
+    cfg: &FitConfig,
+) -> DMatrix<f64> {
+    let column = |i: usize| -> Vec<f64> {
+        if FIXED.contains(&i) {
+            return vec![0.0; r.len()];
+        }
+        let h = 1e-3 * p[i].abs().max(1.0);
+        let mut q = *p;
+        q[i] += h;
+        residuals(base, &q, data, ids, &cfg.scales)
+            .iter()
+            .zip(r)
+            .map(|(a, b)| {
+                let d = (a - b) / h;
+                if d.is_finite() {
+                    d
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    };
+    let threads = cfg.threads.clamp(1, PARAMS);
+    let cols: Vec<(usize, Vec<f64>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let column = &column;
+                s.spawn(move || {
+                    (t..PARAMS)
+                        .step_by(threads)
+                        .map(|i| (i, column(i)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    let mut jac = DMatrix::zeros(r.len(), PARAMS);
+    for (i, col) in cols {
+        for (row, v) in col.into_iter().enumerate() {
+            jac[(row, i)] = v;
+        }
+    }
+    jac
+}
