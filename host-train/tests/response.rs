@@ -194,6 +194,17 @@ fn pinned_rotation_keeps_j_and_the_torque_gain_at_the_prior() {
         ..TrainConfig::default()
     };
     let out = dir.join("p.hfw");
+    let with_rotor_gains = TrainConfig {
+        flight_rotor_gains: true,
+        ..cfg.clone()
+    };
+    let e = host_train::pipeline::train::run(&with_rotor_gains, &dir, &out, true)
+        .expect_err("pinned rotation with per-flight rotor gains is refused");
+    assert!(
+        format!("{e:#}").contains("--no-flight-rotor-gains"),
+        "{e:#}"
+    );
+    assert!(!out.exists(), "nothing written");
     host_train::pipeline::train::run(&cfg, &dir, &out, true).expect("trains");
     let model = host_train::control::adapter::load_learned(&out).expect("blob");
     let prior = hamflight::model::ModelWeights::prior();

@@ -48,6 +48,10 @@ pub struct FitResponseArgs {
     /// (m/s), attitude (rad), rates (rad/s); a smaller scale weighs that quantity more.
     #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.5, 0.2, 0.6])]
     pub scales: Vec<f64>,
+    /// Fit only a linear drag per body axis in the force rows of the velocity term, not the
+    /// force's cross terms in v and ω.
+    #[arg(long)]
+    pub drag_only: bool,
     /// Output: the response as JSON.
     #[arg(long, value_name = "FILE.json")]
     pub out: PathBuf,
@@ -150,6 +154,7 @@ pub fn run(args: &FitResponseArgs) -> Result<FitReport> {
     let cfg = FitConfig {
         iterations: args.iterations,
         scales,
+        drag_only: args.drag_only,
         ..FitConfig::default()
     };
     let quiet = args.quiet;

@@ -226,6 +226,14 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
             windows.mass_kg
         );
     }
+    if cfg.pin_rotation && cfg.flight_rotor_gains {
+        bail!(
+            "--pin-rotation needs --no-flight-rotor-gains: with the torque part of g pinned, each \
+             flight's rotor gains and the shared thrust gain trade a common scale (on the \
+             nano-drone flights: thrust gain 9.0 against rotor gains 0.1), and the blob then \
+             commands a ninth of the thrust in flight"
+        );
+    }
     if cfg.flight_rotor_gains && !windows.realizations.iter().any(|r| r.disturbance_free) {
         eprintln!(
             "note: no flight in `{}` is marked disturbance-free (`import --calm`), so the shared \

@@ -56,6 +56,18 @@ pub const PARAMS: usize = 47;
 /// left the thrust gain at 0.24); a quadrotor's constant force is its thrust's.
 const FIXED: [usize; 3] = [41, 42, 43];
 
+/// True if parameter `i` stays where it starts: [`FIXED`], and with `drag_only` every entry of
+/// A's force rows but their diagonal (v̇ᵢ ← vᵢ, the rotor drag).
+fn is_fixed(i: usize, drag_only: bool) -> bool {
+    if FIXED.contains(&i) {
+        return true;
+    }
+    drag_only && (5..23).contains(&i) && {
+        let (row, col) = ((i - 5) / 6, (i - 5) % 6);
+        row != col
+    }
+}
+
 impl Response {
     /// The blob's own prediction: unit gains, no lag, no velocity term.
     pub fn identity() -> Self {
@@ -232,6 +244,9 @@ pub struct FitConfig {
     pub scales: [f64; 4],
     /// Threads for the finite-difference Jacobian.
     pub threads: usize,
+    /// Fit only the diagonal of A's force rows (a linear rotor drag per body axis), not the
+    /// cross terms.
+    pub drag_only: bool,
 }
 
 impl Default for FitConfig {
@@ -240,6 +255,7 @@ impl Default for FitConfig {
             iterations: 20,
             scales: [0.1, 0.5, 0.2, 0.6],
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            drag_only: false,
         }
     }
 }
@@ -431,7 +447,7 @@ fn jacobian<M: HamiltonianModel + Sync>(
     cfg: &FitConfig,
 ) -> DMatrix<f64> {
     let column = |i: usize| -> Vec<f64> {
-        if FIXED.contains(&i) {
+        if is_fixed(i, cfg.drag_only) {
             return vec![0.0; r.len()];
         }
         let h = 1e-3 * p[i].abs().max(1.0);
