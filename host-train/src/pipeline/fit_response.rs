@@ -3,7 +3,7 @@
 //!
 //! Windows of `--horizon` + 1 continuous states (every `--stride` samples, thinned evenly to at
 //! most `--max-windows`) are rolled out from their first state under the logged wrench; the
-//! response's 47 numbers are fitted by Levenberg–Marquardt to the position, velocity, attitude
+//! response's 48 numbers are fitted by Levenberg–Marquardt to the position, velocity, attitude
 //! and rate errors at steps 1, 2, 5, 10, 20, … N, each scaled by a typical error (0.1 m,
 //! 0.5 m/s, 0.2 rad, 0.6 rad/s). Writes FILE (JSON: the response, the fit's history and the
 //! windows' errors before and after).
@@ -20,7 +20,7 @@ use crate::io::dataset::WindowSpec;
 use crate::io::files::write_atomic;
 use crate::train::data;
 use crate::train::predict::HorizonErrors;
-use crate::train::response::{self, FitConfig, FitStep, Response};
+use crate::train::response::{self, FitConfig, FitStep, ForceTerms, Response};
 
 /// Arguments of `host-train fit-response`.
 #[derive(Args, Debug, Clone)]
@@ -48,10 +48,10 @@ pub struct FitResponseArgs {
     /// (m/s), attitude (rad), rates (rad/s); a smaller scale weighs that quantity more.
     #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.5, 0.2, 0.6])]
     pub scales: Vec<f64>,
-    /// Fit only a linear drag per body axis in the force rows of the velocity term, not the
-    /// force's cross terms in v and ω.
-    #[arg(long)]
-    pub drag_only: bool,
+    /// The velocity term's force rows: `drag` (a linear drag per body axis), `full` (v̇ from
+    /// every component of v and ω) or `none`.
+    #[arg(long, value_enum, default_value_t = ForceTerms::Drag)]
+    pub force_terms: ForceTerms,
     /// Output: the response as JSON.
     #[arg(long, value_name = "FILE.json")]
     pub out: PathBuf,
@@ -154,7 +154,7 @@ pub fn run(args: &FitResponseArgs) -> Result<FitReport> {
     let cfg = FitConfig {
         iterations: args.iterations,
         scales,
-        drag_only: args.drag_only,
+        force: args.force_terms,
         ..FitConfig::default()
     };
     let quiet = args.quiet;

@@ -289,9 +289,6 @@ struct Trainer<'a> {
     fused: bool,
     /// Set once the fused kernel has declined a shape and burn stood in (warned once).
     fused_declined: AtomicBool,
-    /// With [`TrainConfig::pin_rotation`]: g's torque outputs, held at the prior's after every
-    /// step.
-    pin: Option<PinnedGain>,
 }
 
 /// The physical prior training starts from: the described vehicle's inertia (`import
@@ -307,57 +304,16 @@ pub fn prior_of(data: &Windows) -> ModelWeights {
         })
 }
 
-/// Index in [`TModel::tensors`] of the g head's first tensor (the J⁻¹ head's six come first).
-const GAIN_HEAD_FIRST: usize = 6;
-/// Indices in [`TModel::tensors`] of the g head's output-layer weight `[hidden, 24]` and bias.
-const GAIN_OUT_WEIGHT: usize = 10;
-const GAIN_OUT_BIAS: usize = 11;
+/// Number of leading [`TModel::tensors`] that make the J⁻¹ and g heads (six each).
+const RIGID_BODY_TENSORS: usize = 12;
 
-/// g's outputs (row-major 6×4) that [`TrainConfig::pin_rotation`] holds at the prior: the thrust
-/// row's torque columns (2, 1..4) and the three torque rows.
-fn pinned_gain_output(k: usize) -> bool {
-    (9..24).contains(&k)
-}
-
-/// g's output layer with the pinned outputs ([`pinned_gain_output`]) set to the prior's: zero
-/// weights from the hidden layer and the prior's bias, so they equal the true mixer's at every
-/// attitude whatever the hidden layers learn.
-pub fn with_rotation_pinned(w: &ModelWeights, prior: &ModelWeights) -> ModelWeights {
-    let mut out = *w;
-    let l2 = &mut out.gain.l2;
-    for (k, (row, bias)) in l2.weight.iter_mut().zip(l2.bias.iter_mut()).enumerate() {
-        if pinned_gain_output(k) {
-            row.iter_mut().for_each(|v| *v = 0.0);
-            *bias = prior.gain.l2.bias.get(k).copied().unwrap_or(0.0);
-        }
-    }
-    out.inertia = prior.inertia;
-    out
-}
-
-/// The projection of [`with_rotation_pinned`] on the training tensors.
-struct PinnedGain {
-    /// 1 on free outputs, 0 on pinned ones, `[1, 24]`.
-    keep: Tensor<2>,
-    /// The prior's output bias on the pinned outputs, 0 elsewhere, `[1, 24]`.
-    bias: Tensor<2>,
-}
-
-impl PinnedGain {
-    fn new(prior: &[Tensor<2>]) -> Self {
-        let device = prior[GAIN_OUT_BIAS].device();
-        let keep: Vec<f32> = (0..24)
-            .map(|k| if pinned_gain_output(k) { 0.0 } else { 1.0 })
-            .collect();
-        let keep = Tensor::from_data(TensorData::new(keep, [1, 24]), &device);
-        let bias = prior[GAIN_OUT_BIAS].clone() * (keep.clone().neg().add_scalar(1.0));
-        Self { keep, bias }
-    }
-
-    fn apply(&self, params: &mut [Tensor<2>]) {
-        params[GAIN_OUT_WEIGHT] = params[GAIN_OUT_WEIGHT].clone() * self.keep.clone();
-        params[GAIN_OUT_BIAS] =
-            params[GAIN_OUT_BIAS].clone() * self.keep.clone() + self.bias.clone();
+/// `w` with J⁻¹ and g set to `prior`'s ([`TrainConfig::pin_rigid_body`]): the described
+/// inertia and the true mixer at every attitude.
+pub fn with_rigid_body_pinned(w: &ModelWeights, prior: &ModelWeights) -> ModelWeights {
+    ModelWeights {
+        inertia: prior.inertia,
+        gain: prior.gain,
+        ..*w
     }
 }
 
@@ -375,9 +331,6 @@ impl Trainer<'_> {
             let (lv, g) = self.loss_and_grads(chunk);
             if lv.is_finite() {
                 self.adam.step(&mut self.params, &g, &lrs);
-                if let Some(pin) = &self.pin {
-                    pin.apply(&mut self.params);
-                }
                 if let Some(m) = &self.a_mask {
                     self.params[self.n_net] = self.params[self.n_net].clone() * m.clone();
                 }
@@ -525,9 +478,8 @@ impl<'a> Trainer<'a> {
         // A vehicle described at import (`import --vehicle`) starts from its own inertia.
         let prior = prior_of(data);
         let mut init = init_weights_with_prior(cfg.seed, cfg.init_out_gain, prior);
-        if cfg.pin_rotation {
-            init.inertia = prior.inertia;
-            init = with_rotation_pinned(&init, &prior);
+        if cfg.pin_rigid_body {
+            init = with_rigid_body_pinned(&init, &prior);
         }
         let mut params = TModel::from_core(&init, device).tensors();
         let width = FEATURES
@@ -559,11 +511,8 @@ impl<'a> Trainer<'a> {
             a_mask,
             reference: false,
             frozen: (0..=n_net)
-                .map(|i| cfg.pin_rotation && i < GAIN_HEAD_FIRST)
+                .map(|i| cfg.pin_rigid_body && i < RIGID_BODY_TENSORS)
                 .collect(),
-            pin: cfg
-                .pin_rotation
-                .then(|| PinnedGain::new(&TModel::from_core(&prior, device).tensors())),
             fused: cfg.gradient == GradientPath::Fused,
             fused_declined: AtomicBool::new(false),
         }

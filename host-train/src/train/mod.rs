@@ -138,13 +138,12 @@ pub struct TrainConfig {
     /// does, and trained freely they take up large spurious entries (see `docs/vehicles.md`).
     /// Held at zero during training instead, the rest of the model fits worse (measured there).
     pub zero_unactuated_gain_rows: bool,
-    /// Keep the rotational physics at the vehicle description's (default false): J⁻¹ stays the
-    /// prior's (the described inertia) and g's torque rows and the thrust row's torque columns
-    /// stay the true mixer's, so only the thrust gain, W and the a_j are learned. For logs whose
-    /// measured rotor speeds cannot identify the torque effectiveness (docs/benchmark.md: the
-    /// nano-drone flights see 2–4 % of it through a 0.2 s lag); what those logs do identify of
-    /// the rotation goes into a measured-input response ([`response`]) for prediction.
-    pub pin_rotation: bool,
+    /// Keep the rigid body at the vehicle description's (default false): J⁻¹ stays the prior's
+    /// (the described inertia) and g the true mixer's, so only W and the a_j are learned. For
+    /// logs whose measured rotor speeds cannot identify the torque effectiveness
+    /// (docs/benchmark.md: the nano-drone flights show 8–34 % of it through a 70 ms lag); what
+    /// those logs do identify goes into a measured-input response ([`response`]) for prediction.
+    pub pin_rigid_body: bool,
     /// Where the loss's gradient comes from (default [`GradientPath::Fused`], or
     /// [`GradientPath::Burn`] when `HAMFLIGHT_TRAIN_BURN` overrides it: [`GradientPath::from_env`]).
     pub gradient: GradientPath,
@@ -174,7 +173,7 @@ impl Default for TrainConfig {
             flight_check: true,
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
-            pin_rotation: false,
+            pin_rigid_body: false,
             gradient: GradientPath::from_env().unwrap_or_default(),
         }
     }
@@ -226,12 +225,12 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
             windows.mass_kg
         );
     }
-    if cfg.pin_rotation && cfg.flight_rotor_gains {
+    if cfg.pin_rigid_body && cfg.flight_rotor_gains {
         bail!(
-            "--pin-rotation needs --no-flight-rotor-gains: with the torque part of g pinned, each \
-             flight's rotor gains and the shared thrust gain trade a common scale (on the \
-             nano-drone flights: thrust gain 9.0 against rotor gains 0.1), and the blob then \
-             commands a ninth of the thrust in flight"
+            "--pin-rigid-body needs --no-flight-rotor-gains: the per-flight rotor gains scale a \
+             flight's torques too, which the pinned g holds at the mixer's (with g's torque part \
+             pinned and its thrust free, the nano-drone flights traded a thrust gain of 9.0 \
+             against rotor gains of 0.1, and the blob crashed)"
         );
     }
     if cfg.flight_rotor_gains && !windows.realizations.iter().any(|r| r.disturbance_free) {
@@ -249,9 +248,9 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     if cfg.zero_unactuated_gain_rows {
         trained.weights = r#loop::with_unactuated_gain_rows_zeroed(&trained.weights);
     }
-    if cfg.pin_rotation {
+    if cfg.pin_rigid_body {
         trained.weights =
-            r#loop::with_rotation_pinned(&trained.weights, &r#loop::prior_of(&windows));
+            r#loop::with_rigid_body_pinned(&trained.weights, &r#loop::prior_of(&windows));
     }
     let tau = blob_motor_tau_s(cfg, &windows.vehicle)?;
     let model = hamflight::model::LearnedModel::new(trained.weights).with_motor_tau_s(tau);
@@ -371,12 +370,12 @@ pub struct TrainArgs {
     /// prediction turns into force errors at every attitude manoeuvre.
     #[arg(long)]
     pub free_gain: bool,
-    /// Keep J and the torque part of g at the vehicle description's (the prior): learn only the
-    /// thrust gain and the disturbance features. For real logs whose rotor speeds do not
-    /// identify the torque effectiveness (the nano-drone benchmark); fit what they do show of
-    /// the rotation with `host-train fit-response`.
+    /// Keep J and g at the vehicle description's (the prior: its inertia, the true mixer); learn
+    /// only the disturbance features W and the a_j. For real logs whose rotor speeds do not
+    /// identify the torque effectiveness (the nano-drone benchmark); fit what they do show with
+    /// `host-train fit-response`. Needs --no-flight-rotor-gains.
     #[arg(long)]
-    pub pin_rotation: bool,
+    pub pin_rigid_body: bool,
     /// Where the loss's gradient comes from: `fused` (the hand-fused kernel) or `burn` (burn's
     /// autodiff, the reference). Default: fused, or burn when `HAMFLIGHT_TRAIN_BURN=1`.
     #[arg(long, value_enum, value_name = "PATH")]
@@ -412,7 +411,7 @@ impl TrainArgs {
             flight_check: !self.no_flight_check,
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
-            pin_rotation: self.pin_rotation,
+            pin_rigid_body: self.pin_rigid_body,
             gradient: self
                 .gradient
                 .unwrap_or_else(|| TrainConfig::default().gradient),

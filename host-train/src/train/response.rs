@@ -4,16 +4,18 @@
 //! A blob's model maps a wrench u = [f; τ] to the motion. On a log whose wrench comes from
 //! measured rotor speeds (the nano-drone benchmark, docs/benchmark.md), three things sit between
 //! the computed wrench and the motion that the paper's M, g and W cannot hold:
-//! - the speeds' own filtering: the torques act through a first-order lag `torque_lag_s` and with
-//!   an effective gain `torque_gain` per axis (the benchmark's rotor telemetry shows 2–8 % of the
-//!   torque the rigid body needs, 0.2 s late); the thrust has its own gain `thrust_gain`;
+//! - the speeds' own filtering: the thrust and the torques act through first-order lags
+//!   (`thrust_lag_s`, `torque_lag_s`) and with effective gains (`thrust_gain`, `torque_gain` per
+//!   axis); on the benchmark's flights the torques show 8–34 % of what the rigid body needs,
+//!   about 70 ms late;
 //! - a body wrench linear in the body velocity ζ = (v, ω), the rotors' drag and flapping
 //!   moment and the rate damping, written as an acceleration A ζ (`accel_per_velocity`);
 //! - a constant body acceleration c (`accel_bias`): a centre-of-mass offset, a trim torque.
 //!
-//! So the predicted motion is the blob's dynamics under u' = [k_f f; k_τ ∘ τ̄] with
-//! τ̄̇ = (τ − τ̄)/T (backward Euler at the log's rate), plus ζ̇ += A ζ + c. With the identity response ([`Response::identity`]) it is
-//! the blob's own prediction. The response is host-side: the flight core's control path does not
+//! So the predicted motion is the blob's dynamics under u' = [k_f f̄; k_τ ∘ τ̄] with
+//! τ̄̇ = (τ − τ̄)/T and the same for f̄ with T_f (backward Euler at the log's rate), plus
+//! ζ̇ += A ζ + c. With the identity response ([`Response::identity`]) it is the blob's own
+//! prediction. The response is host-side: the flight core's control path does not
 //! use it (the controller flies the blob's M, g and W; docs/benchmark.md says why).
 //!
 //! [`fit`] identifies the response on a dataset by Levenberg–Marquardt on multi-step rollouts.
@@ -40,6 +42,9 @@ pub struct Response {
     pub accel_per_velocity: [[f32; 6]; 6],
     /// c: constant body-frame acceleration, v̇ (m/s²) then ω̇ (rad/s²).
     pub accel_bias: [f32; 6],
+    /// T_f (s): the first-order lag the thrust acts through (0: none).
+    #[serde(default)]
+    pub thrust_lag_s: f32,
 }
 
 impl Default for Response {
@@ -48,23 +53,44 @@ impl Default for Response {
     }
 }
 
-/// Number of parameters: k_f, k_τ (3), T, A (36), c (6).
-pub const PARAMS: usize = 47;
+/// Number of parameters: k_f, k_τ (3), T, A (36), c (6), T_f.
+pub const PARAMS: usize = 48;
+/// Index of T in the parameters.
+const TORQUE_LAG: usize = 4;
+/// Index of T_f in the parameters.
+const THRUST_LAG: usize = 47;
 
 /// Parameters [`fit`] leaves where they start: the constant body force (c's v̇ part), which a
 /// fit trades against the thrust gain (on the nano-drone flights it took 8 m/s² of the 9.8 and
 /// left the thrust gain at 0.24); a quadrotor's constant force is its thrust's.
 const FIXED: [usize; 3] = [41, 42, 43];
 
-/// True if parameter `i` stays where it starts: [`FIXED`], and with `drag_only` every entry of
-/// A's force rows but their diagonal (v̇ᵢ ← vᵢ, the rotor drag).
-fn is_fixed(i: usize, drag_only: bool) -> bool {
+/// Which entries of A's force rows (v̇ ← ζ) a fit may use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+pub enum ForceTerms {
+    /// Every entry: v̇ from v and ω.
+    Full,
+    /// The diagonal only: a linear rotor drag per body axis (v̇ᵢ ← vᵢ).
+    #[default]
+    Drag,
+    /// None: the force is the thrust's alone.
+    None,
+}
+
+/// True if parameter `i` stays where it starts: [`FIXED`], and A's force-row entries that
+/// `force` leaves out.
+fn is_fixed(i: usize, force: ForceTerms) -> bool {
     if FIXED.contains(&i) {
         return true;
     }
-    drag_only && (5..23).contains(&i) && {
-        let (row, col) = ((i - 5) / 6, (i - 5) % 6);
-        row != col
+    if !(5..23).contains(&i) {
+        return false;
+    }
+    let (row, col) = ((i - 5) / 6, (i - 5) % 6);
+    match force {
+        ForceTerms::Full => false,
+        ForceTerms::Drag => row != col,
+        ForceTerms::None => true,
     }
 }
 
@@ -77,6 +103,7 @@ impl Response {
             torque_lag_s: 0.0,
             accel_per_velocity: [[0.0; 6]; 6],
             accel_bias: [0.0; 6],
+            thrust_lag_s: 0.0,
         }
     }
 
@@ -88,7 +115,8 @@ impl Response {
             .chain(self.torque_gain)
             .chain([self.torque_lag_s])
             .chain(self.accel_per_velocity.into_iter().flatten())
-            .chain(self.accel_bias);
+            .chain(self.accel_bias)
+            .chain([self.thrust_lag_s]);
         for (o, v) in p.iter_mut().zip(flat) {
             *o = f64::from(v);
         }
@@ -112,6 +140,7 @@ impl Response {
         for v in r.accel_bias.iter_mut() {
             *v = next();
         }
+        r.thrust_lag_s = next().max(0.0);
         r
     }
 
@@ -176,20 +205,25 @@ pub fn rollout<M: HamiltonianModel>(
     let model = WithVelocityTerm { base, response };
     // The lag discretized by backward Euler, τ̄ₖ = (T τ̄ₖ₋₁ + dt τₖ) / (T + dt): unlike
     // exp(−dt/T), its pole moves at T = 0, so a fit that reaches T = 0 can leave it again.
-    let lag = response.torque_lag_s.max(0.0);
-    let alpha = if lag + dt_s > 0.0 {
-        lag / (lag + dt_s)
-    } else {
-        0.0
+    let pole = |lag: f32| {
+        let lag = lag.max(0.0);
+        if lag + dt_s > 0.0 {
+            lag / (lag + dt_s)
+        } else {
+            0.0
+        }
     };
+    let (alpha, alpha_f) = (pole(response.torque_lag_s), pole(response.thrust_lag_s));
     let mut tau = u.first().map_or([0.0; 3], |u0| [u0[1], u0[2], u0[3]]);
+    let mut thrust = u.first().map_or(0.0, |u0| u0[0]);
     let mut s = *s0;
     for (k, uk) in u.iter().enumerate() {
         for (t, &x) in tau.iter_mut().zip(&uk[1..]) {
             *t = alpha * *t + (1.0 - alpha) * x;
         }
+        thrust = alpha_f * thrust + (1.0 - alpha_f) * uk[0];
         let ue = Vector4::new(
-            response.thrust_gain * uk[0],
+            response.thrust_gain * thrust,
             response.torque_gain[0] * tau[0],
             response.torque_gain[1] * tau[1],
             response.torque_gain[2] * tau[2],
@@ -244,9 +278,8 @@ pub struct FitConfig {
     pub scales: [f64; 4],
     /// Threads for the finite-difference Jacobian.
     pub threads: usize,
-    /// Fit only the diagonal of A's force rows (a linear rotor drag per body axis), not the
-    /// cross terms.
-    pub drag_only: bool,
+    /// Which force terms of A the fit uses (default: the drag per axis).
+    pub force: ForceTerms,
 }
 
 impl Default for FitConfig {
@@ -255,7 +288,7 @@ impl Default for FitConfig {
             iterations: 20,
             scales: [0.1, 0.5, 0.2, 0.6],
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
-            drag_only: false,
+            force: ForceTerms::default(),
         }
     }
 }
@@ -409,7 +442,8 @@ pub fn fit<M: HamiltonianModel + Sync>(
             for (qi, d) in q.iter_mut().zip(delta.iter()) {
                 *qi += d;
             }
-            q[4] = q[4].max(0.0);
+            q[TORQUE_LAG] = q[TORQUE_LAG].max(0.0);
+            q[THRUST_LAG] = q[THRUST_LAG].max(0.0);
             let rq = residuals(base, &q, data, ids, &cfg.scales);
             let cq = cost(&rq);
             if cq < c {
@@ -447,7 +481,7 @@ fn jacobian<M: HamiltonianModel + Sync>(
     cfg: &FitConfig,
 ) -> DMatrix<f64> {
     let column = |i: usize| -> Vec<f64> {
-        if is_fixed(i, cfg.drag_only) {
+        if is_fixed(i, cfg.force) {
             return vec![0.0; r.len()];
         }
         let h = 1e-3 * p[i].abs().max(1.0);
