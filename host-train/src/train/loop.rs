@@ -293,7 +293,7 @@ struct Trainer<'a> {
 
 /// The physical prior training starts from: the described vehicle's inertia (`import
 /// --vehicle`), else the CF2X's.
-pub fn prior_of(data: &Windows) -> ModelWeights {
+fn prior_of(data: &Windows) -> ModelWeights {
     data.vehicle
         .description
         .as_ref()
@@ -308,8 +308,9 @@ pub fn prior_of(data: &Windows) -> ModelWeights {
 const RIGID_BODY_TENSORS: usize = 12;
 
 /// `w` with J⁻¹ and g set to `prior`'s ([`TrainConfig::pin_rigid_body`]): the described
-/// inertia and the true mixer at every attitude.
-pub fn with_rigid_body_pinned(w: &ModelWeights, prior: &ModelWeights) -> ModelWeights {
+/// inertia and the true mixer at every attitude. Training then freezes both heads, so the
+/// blob carries them unchanged.
+fn with_rigid_body_pinned(w: &ModelWeights, prior: &ModelWeights) -> ModelWeights {
     ModelWeights {
         inertia: prior.inertia,
         gain: prior.gain,

@@ -248,10 +248,6 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     if cfg.zero_unactuated_gain_rows {
         trained.weights = r#loop::with_unactuated_gain_rows_zeroed(&trained.weights);
     }
-    if cfg.pin_rigid_body {
-        trained.weights =
-            r#loop::with_rigid_body_pinned(&trained.weights, &r#loop::prior_of(&windows));
-    }
     let tau = blob_motor_tau_s(cfg, &windows.vehicle)?;
     let model = hamflight::model::LearnedModel::new(trained.weights).with_motor_tau_s(tau);
     let mut report = export::report(cfg, &windows, &train_ids, &heldout, &trained);

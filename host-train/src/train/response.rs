@@ -47,12 +47,6 @@ pub struct Response {
     pub thrust_lag_s: f32,
 }
 
-impl Default for Response {
-    fn default() -> Self {
-        Self::identity()
-    }
-}
-
 /// Number of parameters: k_f, k_τ (3), T, A (36), c (6), T_f.
 pub const PARAMS: usize = 48;
 /// Index of T in the parameters.
