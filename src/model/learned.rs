@@ -425,6 +425,48 @@ impl ModelWeights {
         }
         out
     }
+
+    /// The same model with the learned features kept only in the span of `p` (a projector on
+    /// ℝᵖ, in the features' own basis) and the nominal features elsewhere:
+    /// W' = W P + W_nominal (I − P) at every state, exactly (folded into the output layer like
+    /// [`ModelWeights::with_feature_basis`]). For features whose training flights excited only
+    /// some directions of a: W is identified only along the a_j (the loss sees W a_j alone).
+    pub fn with_features_in_subspace(&self, p: &SMatrix<f32, FEATURES, FEATURES>) -> Self {
+        let mut out = self.with_feature_basis(p);
+        let nominal = SMatrix::<f32, 6, FEATURES>::from_row_slice(&nominal_feature_bias());
+        let rest = nominal * (SMatrix::<f32, FEATURES, FEATURES>::identity() - p);
+        for (k, b) in out.disturbance.l2.bias.iter_mut().enumerate() {
+            *b += rest
+                .get((k / FEATURES, k % FEATURES))
+                .copied()
+                .unwrap_or(0.0);
+        }
+        out
+    }
+
+    /// The same model with the features pulled toward the nominal ones by `keep` ∈ [0, 1]:
+    /// W' = keep · W + (1 − keep) · W_nominal at every state, exactly, since the nominal
+    /// features are the W head's constant output [`nominal_feature_bias`] (folded into the
+    /// output layer, so inference costs nothing more). `keep` = 1 is `self`, 0 the nominal
+    /// features; values outside [0, 1] are clamped. What the trainer backs off to when the
+    /// learned features do not fly (`host-train train`, docs/training.md).
+    pub fn with_features_toward_nominal(&self, keep: f32) -> Self {
+        let keep = if keep.is_nan() {
+            0.0
+        } else {
+            keep.clamp(0.0, 1.0)
+        };
+        let mut out = *self;
+        let l2 = &mut out.disturbance.l2;
+        l2.weight
+            .iter_mut()
+            .flat_map(|row| row.iter_mut())
+            .for_each(|v| *v *= keep);
+        for (b, n) in l2.bias.iter_mut().zip(nominal_feature_bias()) {
+            *b = keep * *b + (1.0 - keep) * n;
+        }
+        out
+    }
 }
 
 const _: () = assert!(GAIN_IN == 9 && JINV_OUT == 6 && GAIN_OUT == 24);
@@ -591,5 +633,28 @@ mod tests {
         let expect = original.features(&s) * t;
         let err = (changed.features(&s) - expect).norm() / expect.norm();
         assert!(err < 1e-4, "W' vs W T: {err}");
+    }
+
+    #[test]
+    fn features_toward_nominal_blend_exactly_at_every_state() {
+        let w = random_weights(11, 0.5);
+        let nominal_model = NominalModel::default();
+        for s in [State::default(), tilted_state()] {
+            let learned = LearnedModel::new(w).features(&s);
+            let nominal = nominal_model.terms(&s).features;
+            for keep in [0.0f32, 0.3, 1.0] {
+                let got = LearnedModel::new(w.with_features_toward_nominal(keep)).features(&s);
+                let expect = learned * keep + nominal * (1.0 - keep);
+                let err = (got - expect).norm() / expect.norm();
+                assert!(err < 1e-5, "keep {keep}: W' vs blend {err}");
+            }
+        }
+        // Out of range clamps: below 0 is the nominal features, NaN too.
+        let s = tilted_state();
+        let nominal = nominal_model.terms(&s).features;
+        for keep in [-1.0f32, f32::NAN] {
+            let got = LearnedModel::new(w.with_features_toward_nominal(keep)).features(&s);
+            assert!((got - nominal).norm() < 1e-6 * nominal.norm().max(1.0));
+        }
     }
 }

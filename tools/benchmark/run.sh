@@ -79,14 +79,14 @@ echo "== 4. train"
 "$HT" train --data "$work/dataset" --out "$work/model.hfw" --epochs "$EPOCHS" --seed "$SEED" \
     --window-len "$WINDOW_LEN" --stride "$STRIDE" --no-flight-check 2>&1 | tee "$work/train.log"
 
-echo "== 4b. train with the rigid body pinned (J and g from vehicle.toml; W learned)"
-# --no-flight-check: the W these flights teach fails the trainer's flight check (the gradient law
-# crashes or tracks worse than no adaptation) in 9 of the 12 seed, epoch and --feature-decay
-# settings tried (docs/benchmark.md). Prediction does not use W (a = 0): the score is the same
-# for any W.
+echo "== 4b. train with the rigid body pinned (J and g from vehicle.toml; W learned), flight-checked"
+# The flights carry no deliberate disturbance: their a_j are thrust offsets along z. W learned
+# in full fails the flight check (the gradient law crashes), so the trainer keeps the learned
+# features along that one direction and the nominal ones elsewhere (report: features), which
+# passes for seeds 0-2 (docs/benchmark.md). Prediction does not use W (a = 0).
 "$HT" train --data "$work/dataset" --out "$work/pinned.hfw" --epochs "$EPOCHS" --seed "$SEED" \
     --window-len "$WINDOW_LEN" --stride "$STRIDE" --pin-rigid-body --no-flight-rotor-gains \
-    --no-flight-check 2>&1 | tee "$work/train-pinned.log"
+    2>&1 | tee "$work/train-pinned.log"
 
 echo "== 4c. fit the pinned blob's measured-input response on the training flights (about 90 s)"
 "$HT" fit-response --weights "$work/pinned.hfw" --data "$work/train-raw" --horizon 50 \

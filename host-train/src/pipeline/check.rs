@@ -7,8 +7,10 @@
 //! losing 30 % of its thrust mid-flight. On each it flies without adaptation, with the paper's
 //! gradient law and with the composite law. The blob passes if no flight crashes and neither
 //! law tracks worse than without adaptation (within [`ADAPTIVE_MARGIN`]). Otherwise `train`
-//! writes nothing and says which law failed on which scenario; `--no-flight-check` skips the
-//! check. The core's normalized gradient law already makes the adaptation's rates hold for any
+//! tries its back-off ([`crate::train::backoff`]: the learned features only along the directions
+//! the flights excited, then pulled toward the nominal ones) and writes the first blob that
+//! passes; if none does it writes nothing and says which law failed on which scenario;
+//! `--no-flight-check` skips the check. The core's normalized gradient law already makes the adaptation's rates hold for any
 //! scale of learned features; this check is the end-to-end guard on top of it.
 
 use crate::control::adapter::{airframe_of, gains_for, CoreController};

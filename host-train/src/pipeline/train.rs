@@ -1,28 +1,73 @@
 //! `host-train train`: training ([`crate::train`]), then the flight check ([`super::check`]),
 //! then the blob and its report.
 
-use super::check::{require, CHECK_SCENARIOS};
+use super::check::{require, run_model as run_check, CHECK_SCENARIOS};
 use crate::train::export;
-use crate::train::{self as training, TrainArgs, TrainConfig, TrainReport};
+use crate::train::{self as training, backoff, TrainArgs, TrainConfig, TrainReport};
 use anyhow::Result;
 use std::path::Path;
 
 /// Trains on the dataset in `data_dir`, flies the flight check (unless `cfg.flight_check` is
-/// off) and writes `out` (the blob) and `out.json` (the report).
+/// off; when the learned features fail it, the back-off's blobs in turn,
+/// [`backoff::candidates`]) and writes `out` (the blob that passed) and `out.json` (the report,
+/// whose `features` says what the blob keeps).
 ///
 /// # Errors
 /// As [`training::fit`]; a failed flight check ([`require`]); a failure writing the outputs.
 pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Result<TrainReport> {
     let fitted = training::fit(cfg, data_dir, quiet)?;
     let mut report = fitted.report;
+    let mut model = fitted.model;
     if cfg.flight_check {
-        report.flight_check = Some(require(
-            &fitted.model,
-            fitted.manifest_mass_kg,
-            &fitted.vehicle,
-        )?);
+        let (mass, vehicle) = (fitted.manifest_mass_kg, &fitted.vehicle);
+        let a: Vec<_> = report
+            .realizations
+            .iter()
+            .filter(|r| !r.disturbance_free)
+            .map(|r| r.a)
+            .collect();
+        let tries = backoff::candidates(&fitted.model.weights, &a, cfg.feature_backoff);
+        for (k, c) in tries.iter().enumerate() {
+            let mut candidate = fitted.model;
+            candidate.weights = c.weights;
+            let check = if k + 1 == tries.len() {
+                // The last try's failure is the error, with what to do about it.
+                require(&candidate, mass, vehicle)?
+            } else {
+                run_check(&candidate, mass, vehicle)?
+            };
+            if let Some(why) = check.failure.clone() {
+                report.features.failed.push((c.excited_dims, c.kept, why));
+                continue;
+            }
+            report.features.excited_dims = c.excited_dims;
+            report.features.kept = c.kept;
+            report.flight_check = Some(check);
+            model = candidate;
+            break;
+        }
+        if let Some((_, _, why)) = report.features.failed.first() {
+            let f = &report.features;
+            let kept = if f.excited_dims == 0 {
+                "the nominal features (a world force and a body torque per axis)".to_string()
+            } else {
+                format!(
+                    "the learned features along the {} of {} directions of a the flights \
+                     excited ({:.0} % of their deviation from the nominal features) and the \
+                     nominal ones elsewhere",
+                    f.excited_dims,
+                    hamflight::model::FEATURES,
+                    100.0 * f.kept
+                )
+            };
+            eprintln!(
+                "note: the learned disturbance features failed the flight check ({why}); the \
+                 blob has {kept}, which passes (report: `features`; --no-feature-backoff \
+                 writes nothing instead)"
+            );
+        }
     }
-    export::write(out, &fitted.model, &report)?;
+    export::write(out, &model, &report)?;
     Ok(report)
 }
 

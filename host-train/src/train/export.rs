@@ -43,6 +43,29 @@ pub struct CalmPredictionErrors {
     pub nominal: PredictionErrors,
 }
 
+/// What the written blob keeps of the learned features W ([`super::backoff`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct FeatureBackoff {
+    /// Directions of a along which the blob's W is the learned one (6: all), the nominal
+    /// features elsewhere.
+    pub excited_dims: usize,
+    /// The share of the learned features' deviation from the nominal ones kept along those
+    /// directions (1: as learned).
+    pub kept: f32,
+    /// The blobs that failed the flight check first: (excited_dims, kept, why).
+    pub failed: Vec<(usize, f32, String)>,
+}
+
+impl Default for FeatureBackoff {
+    fn default() -> Self {
+        Self {
+            excited_dims: FEATURES,
+            kept: 1.0,
+            failed: Vec::new(),
+        }
+    }
+}
+
 /// One realization's learned a_j next to its true disturbance.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealizationReport {
@@ -110,6 +133,10 @@ pub struct TrainReport {
     pub blob_motor_tau_s: f32,
     /// The SITL flight check before writing ([`crate::pipeline::train`]); null when skipped.
     pub flight_check: Option<FlightCheck>,
+    /// What the written blob keeps of the learned features: all of them, unless the flight
+    /// check's back-off ([`super::backoff`]) had to keep less. The held-out errors and a_j
+    /// above are the learned model's.
+    pub features: FeatureBackoff,
     /// Learned J at hover (R = I), kg·m², row-major.
     pub learned_inertia_hover_kg_m2: [[f32; 3]; 3],
     /// The true J (kg·m²), from the manifest (null when it gives none).
@@ -331,6 +358,7 @@ pub fn report(
         motor_tau_s: data.vehicle.motor_tau_s,
         blob_motor_tau_s: hamflight::model::DEFAULT_MOTOR_TAU_S,
         flight_check: None,
+        features: FeatureBackoff::default(),
         learned_inertia_hover_kg_m2: std::array::from_fn(|r| std::array::from_fn(|c| j[(r, c)])),
         true_inertia_kg_m2: true_j
             .map(|tj| std::array::from_fn(|r| std::array::from_fn(|c| tj[(r, c)]))),

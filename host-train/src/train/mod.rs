@@ -29,6 +29,7 @@
 //!    tensor model, and the fused kernel's loss and gradients against burn's. It must pass
 //!    before the fused path is trusted again.
 
+pub mod backoff;
 pub mod blackbox;
 pub mod data;
 pub mod export;
@@ -128,6 +129,11 @@ pub struct TrainConfig {
     /// Fly the new blob in the SITL before writing it, and refuse to write one that crashes the
     /// adaptive controller ([`crate::pipeline::train`]; default true).
     pub flight_check: bool,
+    /// When the learned features fail the flight check, keep them only along the directions
+    /// the flights excited and pull them toward the nominal ones ([`backoff::candidates`]),
+    /// and write the first blob that flies, saying so (default true); off, a failed check
+    /// writes nothing.
+    pub feature_backoff: bool,
     /// The motors' first-order time constant (s) written into the blob, what the composite
     /// law's prediction assumes; `None` (default) takes the manifest's `vehicle.motor_tau_s`
     /// (`import --motor-tau-s`), else [`hamflight::model::DEFAULT_MOTOR_TAU_S`].
@@ -171,6 +177,7 @@ impl Default for TrainConfig {
             flight_rotor_gains: true,
             feature_epochs: 12,
             flight_check: true,
+            feature_backoff: true,
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
             pin_rigid_body: false,
@@ -355,6 +362,14 @@ pub struct TrainArgs {
     /// and nothing is written if adaptive crashes or tracks worse.
     #[arg(long)]
     pub no_flight_check: bool,
+    /// Write nothing when the learned features fail the flight check. By default the trainer
+    /// then keeps them only along the directions of a the flights excited (nominal elsewhere),
+    /// pulls those toward the nominal features (50, 25, 10 % kept), then tries the nominal
+    /// features, and writes the first blob that passes, saying what it kept: flights without
+    /// a deliberate disturbance teach W along one or two directions, and the adaptation law
+    /// chases the untaught rest.
+    #[arg(long)]
+    pub no_feature_backoff: bool,
     /// The motors' first-order time constant (s) written into the blob, what the composite
     /// adaptation law's prediction assumes. Default: the manifest's `vehicle.motor_tau_s` (what
     /// `import --motor-tau-s` was told), else 0.05 s.
@@ -405,6 +420,7 @@ impl TrainArgs {
             flight_rotor_gains: !self.no_flight_rotor_gains,
             feature_epochs: self.feature_epochs,
             flight_check: !self.no_flight_check,
+            feature_backoff: !self.no_feature_backoff,
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
             pin_rigid_body: self.pin_rigid_body,
