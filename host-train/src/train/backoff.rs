@@ -82,6 +82,15 @@ pub fn candidates(learned: &ModelWeights, a: &[[f32; FEATURES]], backoff: bool) 
     }
     let (p, rank) = excited_subspace(a);
     let excited = learned.with_features_in_subspace(&p);
+    if rank == 0 {
+        // Nothing excited: only the nominal features remain to try.
+        out.push(Candidate {
+            excited_dims: 0,
+            kept: 0.0,
+            weights: learned.with_features_toward_nominal(0.0),
+        });
+        return out;
+    }
     if rank < FEATURES {
         out.push(Candidate {
             excited_dims: rank,
@@ -180,5 +189,9 @@ mod tests {
             .map(|c| LearnedModel::new(c.weights).features(&tilted));
         assert!(last.is_some_and(|f| (f - nominal).norm() < 1e-6));
         assert_eq!(candidates(&w, &a, false).len(), 1);
+        // No flight excited anything (all calm): W as learned, then the nominal features.
+        let c = candidates(&w, &[], true);
+        assert_eq!(c.len(), 2);
+        assert_eq!((c[1].excited_dims, c[1].kept), (0, 0.0));
     }
 }
