@@ -82,8 +82,18 @@ fn score_reproduces_the_training_reports_heldout_errors() {
     );
     assert!(last(&row("hold").rate_mae_rad_s) > 10.0 * last(&row("nominal").rate_mae_rad_s));
     assert!(last(&row("zero-order").pos_mae_m) > last(&row("hold").pos_mae_m));
+    // The SITL's log is kinematically consistent: its velocities integrate to its positions
+    // far better than holding the first velocity does.
+    let floor = last(&s.logged_velocity_pos_mae_m);
+    assert_eq!(s.logged_velocity_pos_mae_m.len(), 4);
+    assert!(
+        floor < 0.1 * last(&row("hold").pos_mae_m),
+        "∫ logged v {floor} m against hold {} m",
+        last(&row("hold").pos_mae_m)
+    );
     let json = std::fs::read_to_string(dir.join("score").join("score.json")).expect("json");
     assert!(json.contains("\"rate_mae_rad_s\""));
+    assert!(json.contains("\"logged_velocity_pos_mae_m\""));
     let svg = std::fs::read_to_string(dir.join("score").join("score.svg")).expect("svg");
     assert!(svg.starts_with("<svg"));
     print!("{}", score::table(&s));

@@ -10,6 +10,13 @@
 //! - `zero-order`: every state held at the window's first (the error a predictor must beat to
 //!   say anything).
 //!
+//! Beside the predictors, `logged_velocity_pos_mae_m`: the position the log's own world
+//! velocities integrate to (trapezoid, from the window's first position), against the logged
+//! position. It reads the future velocities, so it is not a predictor: it measures how well the
+//! log's velocity and position agree, an error a predictor that starts from the logged
+//! velocity will hardly beat (the nano-drone benchmark's melon flights: 0.036 m at 50 steps,
+//! a third of the best predictor's; docs/benchmark.md).
+//!
 //! For each predicted step k = 1 … N it reports the mean (MAE) and the root mean square (RMSE)
 //! over windows of the error norms: position ‖p̂ − p‖ (m), velocity ‖R̂ v̂ − R v‖ (world frame,
 //! m/s; the body-frame norm, as the training report uses, is kept too), attitude as the
@@ -91,6 +98,9 @@ pub struct Score {
     pub nominal_inertia_kg_m2: [f64; 3],
     /// Every predictor.
     pub predictors: Vec<PredictorScore>,
+    /// Per step: the mean over windows of ‖p₀ + ∫ R v dt − p‖ (m) with the logged velocities
+    /// (module docs): the log's kinematic consistency, not a predictor.
+    pub logged_velocity_pos_mae_m: Vec<f64>,
 }
 
 /// Errors of the kinematic predictors over windows `ids`: `hold` keeps the world velocity and
@@ -119,6 +129,31 @@ pub fn baseline_errors(data: &Windows, ids: &[usize], hold: bool) -> HorizonErro
         acc.n += 1;
     }
     acc.finish()
+}
+
+/// Per step k = 1 … N, the mean over windows `ids` of ‖p₀ + ∫ R v dt − p_k‖ (m): the log's own
+/// world velocities integrated by the trapezoid rule against its positions.
+pub fn logged_velocity_position_errors(data: &Windows, ids: &[usize]) -> Vec<f64> {
+    let dt = 1.0 / f64::from(data.sample_hz);
+    let n = data.window_len.saturating_sub(1);
+    let mut sum = vec![0.0f64; n];
+    let mut windows = 0usize;
+    for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
+        let Some(s0) = w.states.first() else { continue };
+        let world = |s: &hamflight::model::State| (s.rot * s.v_body_m_s).cast::<f64>();
+        let mut p = s0.p_m.cast::<f64>();
+        let mut v_prev = world(s0);
+        for (k, e) in sum.iter_mut().enumerate() {
+            let Some(t) = w.states.get(k + 1) else { break };
+            let v = world(t);
+            p += (v_prev + v) * (0.5 * dt);
+            v_prev = v;
+            *e += (p - t.p_m.cast::<f64>()).norm();
+        }
+        windows += 1;
+    }
+    let m = windows.max(1) as f64;
+    sum.into_iter().map(|e| e / m).collect()
 }
 
 /// Scores `model` on every window of `data` (`ids` = all), with `nominal` as the physics row.
@@ -185,6 +220,7 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         nominal_mass_kg: mass,
         nominal_inertia_kg_m2: j,
         predictors: score_windows(&model, &nominal, &data, &ids),
+        logged_velocity_pos_mae_m: logged_velocity_position_errors(&data, &ids),
     };
     if let Some(path) = &args.response {
         let response = crate::pipeline::fit_response::load_response(path)?;
@@ -248,6 +284,16 @@ pub fn table(s: &Score) -> String {
             cell(&e.rate_mae_rad_s)
         );
     }
+    out += &format!(
+        "{:<11} {:>26}   (the log's velocities integrated: its kinematic consistency, not a \
+         predictor)\n",
+        "∫ logged v",
+        steps
+            .iter()
+            .map(|k| format!("{:.4}", at(&s.logged_velocity_pos_mae_m, *k)))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    );
     out
 }
 
@@ -262,12 +308,16 @@ fn plot(s: &Score, path: &Path) -> Result<()> {
     ];
     let panels: Vec<crate::report::plot::HorizonPanel<'_>> = picks
         .iter()
-        .map(|(label, pick)| {
-            let lines = s
+        .enumerate()
+        .map(|(i, (label, pick))| {
+            let mut lines: Vec<(&str, &[f64])> = s
                 .predictors
                 .iter()
                 .map(|p| (p.name.as_str(), pick(&p.errors).as_slice()))
                 .collect();
+            if i == 0 {
+                lines.push(("∫ logged v", s.logged_velocity_pos_mae_m.as_slice()));
+            }
             (*label, lines)
         })
         .collect();
@@ -280,4 +330,54 @@ fn plot(s: &Score, path: &Path) -> Result<()> {
         &panels,
         path,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::data::Window;
+    use hamflight::model::State;
+
+    /// A window flown at 1 m/s along world x, tilted so that body and world frames differ,
+    /// with the logged velocity `scale` times the true one.
+    fn window(scale: f32) -> Window {
+        let rot = *nalgebra::Rotation3::from_euler_angles(0.0, 0.0, 0.7).matrix();
+        let v_world = Vector3::new(1.0, 0.0, 0.0);
+        let states = (0..=10)
+            .map(|k| State {
+                p_m: v_world * (k as f32 * 0.01),
+                rot,
+                v_body_m_s: rot.transpose() * v_world * scale,
+                ..State::default()
+            })
+            .collect();
+        Window {
+            states,
+            u: vec![[0.0; 4]; 10],
+            realization: 0,
+        }
+    }
+
+    fn windows(scale: f32) -> Windows {
+        Windows {
+            windows: vec![window(scale)],
+            sample_hz: 100.0,
+            window_len: 11,
+            mass_kg: 0.045,
+            realizations: Vec::new(),
+            manifest_mass_kg: 0.045,
+            vehicle: Default::default(),
+        }
+    }
+
+    #[test]
+    fn logged_velocity_integral_measures_the_logs_consistency() {
+        let exact = logged_velocity_position_errors(&windows(1.0), &[0]);
+        assert_eq!(exact.len(), 10);
+        assert!(exact.iter().all(|e| *e < 1e-6), "{exact:?}");
+        // Velocities logged 10 % too large: after 0.1 s the integral is 1 cm ahead.
+        let inflated = logged_velocity_position_errors(&windows(1.1), &[0]);
+        let last = inflated.last().copied().unwrap_or(0.0);
+        assert!((last - 0.01).abs() < 1e-5, "{inflated:?}");
+    }
 }
