@@ -70,6 +70,7 @@ fn score_reproduces_the_training_reports_heldout_errors() {
         vehicle: Some(vf),
         out: Some(dir.join("score")),
         response: None,
+        history_s: None,
     };
     let s = score::run(&args).expect("scores");
     assert_eq!(s.windows, windows.windows.len());

@@ -10,6 +10,13 @@
 //! - `zero-order`: every state held at the window's first (the error a predictor must beat to
 //!   say anything).
 //!
+//! With `--response FILE` the row `learned+response` (the blob with a measured-input response,
+//! [`crate::train::response`]); with `--history-s S` as well, `learned+response+adapted`: the
+//! same with a constant body force read from the S seconds of the flight before each window
+//! ([`history_force_offset`]), what the adaptation law estimates online. That row sees more
+//! than the window's first state and inputs, so it is outside the nano-drone benchmark's
+//! protocol; every row is then scored on the windows that have that much flight before them.
+//!
 //! Beside the predictors, `logged_velocity_pos_mae_m`: the position the log's own world
 //! velocities integrate to (trapezoid, from the window's first position), against the logged
 //! position. It reads the future velocities, so it is not a predictor: it measures how well the
@@ -39,9 +46,10 @@ use crate::control::adapter::load_learned;
 use crate::io::dataset::WindowSpec;
 use crate::io::files::write_atomic;
 use crate::sim::vehicle::VehicleFile;
-use crate::train::data::{self, Windows};
+use crate::train::data::{self, Window, Windows};
 use crate::train::predict::Acc;
 pub use crate::train::predict::{model_errors, HorizonErrors};
+use crate::train::response::Response;
 
 /// Arguments of `host-train score`.
 #[derive(Args, Clone, Debug)]
@@ -68,6 +76,13 @@ pub struct ScoreArgs {
     /// `learned+response`, the blob with the response's torque gain and lag and velocity term.
     #[arg(long, value_name = "FILE.json")]
     pub response: Option<PathBuf>,
+    /// With --response: also score `learned+response+adapted`, the response with a constant
+    /// body force estimated from the S seconds of the same flight before each window (what the
+    /// adaptation law estimates online). Every row is then scored on the windows that have
+    /// that much flight before them. Outside the benchmark's protocol, which gives a predictor
+    /// only the window's first state and inputs.
+    #[arg(long, value_name = "S", requires = "response")]
+    pub history_s: Option<f64>,
 }
 
 /// One predictor's row.
@@ -156,6 +171,118 @@ pub fn logged_velocity_position_errors(data: &Windows, ids: &[usize]) -> Vec<f64
     sum.into_iter().map(|e| e / m).collect()
 }
 
+/// The dataset's sample rate (Hz), from its manifest.
+fn dataset_rate(dir: &Path) -> Result<f64> {
+    Ok(crate::io::dataset::load_manifest(dir)?.sample_hz)
+}
+
+/// Splits each window of `data` into its first `k` steps (the history, `k` + 1 states and `k`
+/// inputs) and the rest (the window scored, which starts where the history ends).
+fn split_history(mut data: Windows, k: usize) -> (Windows, Vec<Window>) {
+    if k == 0 {
+        return (data, Vec::new());
+    }
+    let mut histories = Vec::with_capacity(data.windows.len());
+    for w in data.windows.iter_mut() {
+        let states = w.states.split_off(k);
+        let u = w.u.split_off(k);
+        let mut head = std::mem::replace(
+            w,
+            Window {
+                states,
+                u,
+                realization: w.realization,
+            },
+        );
+        if let Some(first) = w.states.first() {
+            head.states.push(*first);
+        }
+        histories.push(head);
+    }
+    data.window_len = data.window_len.saturating_sub(k);
+    (data, histories)
+}
+
+/// Steps of each history segment rolled out to read the force offset.
+const HISTORY_SEGMENT: usize = 10;
+
+/// The constant body-frame acceleration (m/s²) that `history` says `response` misses: the
+/// history is cut into [`HISTORY_SEGMENT`]-step pieces, each rolled out from its logged first
+/// state, and the end velocity's miss (world frame, over the piece's duration) is turned into
+/// the body frame at the piece's middle and averaged. Zero for a history shorter than a piece.
+pub fn history_force_offset<M: hamflight::model::HamiltonianModel>(
+    model: &M,
+    response: &Response,
+    history: &Window,
+    dt_s: f32,
+) -> Vector3<f32> {
+    let mut sum = Vector3::zeros();
+    let mut n = 0usize;
+    let mut j = 0;
+    while j + HISTORY_SEGMENT < history.states.len() {
+        let (Some(s0), Some(end), Some(mid), Some(u)) = (
+            history.states.get(j),
+            history.states.get(j + HISTORY_SEGMENT),
+            history.states.get(j + HISTORY_SEGMENT / 2),
+            history.u.get(j..j + HISTORY_SEGMENT),
+        ) else {
+            break;
+        };
+        let mut last = None;
+        crate::train::response::rollout(model, response, s0, u, dt_s, |_, s| last = Some(*s));
+        if let Some(p) = last {
+            let miss = end.rot * end.v_body_m_s - p.rot * p.v_body_m_s;
+            let a_world = miss / (HISTORY_SEGMENT as f32 * dt_s);
+            if a_world.iter().all(|x| x.is_finite()) {
+                sum += mid.rot.transpose() * a_world;
+                n += 1;
+            }
+        }
+        j += HISTORY_SEGMENT;
+    }
+    if n == 0 {
+        Vector3::zeros()
+    } else {
+        sum / n as f32
+    }
+}
+
+/// Errors of `response` with each window's constant body force read from its history
+/// ([`history_force_offset`]) added to the response's.
+fn adapted_errors(
+    model: &LearnedModel,
+    response: &Response,
+    data: &Windows,
+    histories: &[Window],
+) -> HorizonErrors {
+    let dt = 1.0 / data.sample_hz;
+    let n = data.window_len.saturating_sub(1);
+    let mut acc = Acc::new(n);
+    for (w, h) in data.windows.iter().zip(histories) {
+        let Some(s0) = w.states.first() else { continue };
+        let c = history_force_offset(model, response, h, dt);
+        let mut adapted = response.clone();
+        for (b, x) in adapted.accel_bias.iter_mut().zip(c.iter()) {
+            *b += *x;
+        }
+        let u = w.u.get(..n).unwrap_or(&w.u);
+        let mut last = (0, *s0);
+        crate::train::response::rollout(model, &adapted, s0, u, dt, |k, s| {
+            if let Some(t) = w.states.get(k + 1) {
+                acc.add(k, s, t);
+            }
+            last = (k + 1, *s);
+        });
+        for k in last.0..n {
+            if let Some(t) = w.states.get(k + 1) {
+                acc.add(k, &last.1, t);
+            }
+        }
+        acc.n += 1;
+    }
+    acc.finish()
+}
+
 /// Scores `model` on every window of `data` (`ids` = all), with `nominal` as the physics row.
 pub fn score_windows(
     model: &LearnedModel,
@@ -185,8 +312,18 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         bail!("--horizon and --stride must be at least 1");
     }
     let model = load_learned(&args.weights)?;
+    let history = match args.history_s {
+        Some(h) if !(h.is_finite() && h > 0.0) => {
+            bail!("--history-s must be a positive number of seconds (got {h})")
+        }
+        Some(h) => Some(h),
+        None => None,
+    };
+    // With a history, windows are cut longer and split: the first `k` steps are the history.
+    let peek = dataset_rate(&args.data)?;
+    let k = history.map_or(0, |h| (h * peek).round().max(1.0) as usize);
     let spec = WindowSpec {
-        len: args.horizon + 1,
+        len: args.horizon + 1 + k,
         stride: args.stride,
     };
     let data = data::load(&args.data, spec).with_context(|| {
@@ -195,6 +332,7 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
             spec.len, args.horizon
         )
     })?;
+    let (data, histories) = split_history(data, k);
     let vehicle = args.vehicle.as_deref().map(VehicleFile::load).transpose()?;
     let described = vehicle.or_else(|| data.vehicle.description.clone());
     let (mass, j) = match &described {
@@ -231,6 +369,15 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
                 errors: crate::train::response::response_errors(&model, &response, &data, &ids),
             },
         );
+        if k > 0 {
+            score.predictors.insert(
+                2,
+                PredictorScore {
+                    name: "learned+response+adapted".into(),
+                    errors: adapted_errors(&model, &response, &data, &histories),
+                },
+            );
+        }
     }
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
@@ -335,7 +482,6 @@ fn plot(s: &Score, path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::data::Window;
     use hamflight::model::State;
 
     /// A window flown at 1 m/s along world x, tilted so that body and world frames differ,
@@ -379,5 +525,66 @@ mod tests {
         let inflated = logged_velocity_position_errors(&windows(1.1), &[0]);
         let last = inflated.last().copied().unwrap_or(0.0);
         assert!((last - 0.01).abs() < 1e-5, "{inflated:?}");
+    }
+
+    #[test]
+    fn the_history_gives_back_the_force_offset_the_model_misses() {
+        use hamflight::model::HamiltonianModel;
+        let model = hamflight::model::NominalModel::default();
+        let dt = 0.01;
+        let offset = Vector3::new(0.3, -0.2, -0.8);
+        let mut truth = Response::identity();
+        truth.accel_bias[..3].copy_from_slice(offset.as_slice());
+        // A tilted hover with slowly turning body rates, flown by the truth.
+        let hover_n = model.mass_kg() * hamflight::model::GRAVITY_M_S2;
+        let u: Vec<[f32; 4]> = (0..50)
+            .map(|k| [hover_n, 1e-6 * (k as f32 * 0.2).sin(), 0.0, 0.0])
+            .collect();
+        let s0 = State {
+            rot: *nalgebra::Rotation3::from_euler_angles(0.1, -0.05, 0.3).matrix(),
+            ..State::default()
+        };
+        let mut states = vec![s0];
+        crate::train::response::rollout(&model, &truth, &s0, &u, dt, |_, s| states.push(*s));
+        let history = Window {
+            states,
+            u,
+            realization: 0,
+        };
+        let c = history_force_offset(&model, &Response::identity(), &history, dt);
+        assert!(
+            (c - offset).norm() < 0.02 * offset.norm(),
+            "{c:?} against {offset:?}"
+        );
+        // The truth itself leaves nothing to estimate.
+        let c = history_force_offset(&model, &truth, &history, dt);
+        assert!(c.norm() < 1e-3, "{c:?}");
+        // Too short a history: zero.
+        let short = Window {
+            states: history.states[..5].to_vec(),
+            u: history.u[..4].to_vec(),
+            realization: 0,
+        };
+        assert_eq!(
+            history_force_offset(&model, &Response::identity(), &short, dt),
+            Vector3::zeros()
+        );
+    }
+
+    #[test]
+    fn a_window_splits_into_its_history_and_the_window_scored() {
+        let whole = windows(1.0);
+        let (scored, histories) = split_history(whole.clone(), 4);
+        assert_eq!(scored.window_len, 7);
+        let (w, h) = (&scored.windows[0], &histories[0]);
+        assert_eq!((w.states.len(), w.u.len()), (7, 6));
+        assert_eq!((h.states.len(), h.u.len()), (5, 4));
+        // The history ends where the window scored starts, and both are the original's.
+        assert_eq!(h.states[4], w.states[0]);
+        assert_eq!(w.states[0], whole.windows[0].states[4]);
+        assert_eq!(h.states[0], whole.windows[0].states[0]);
+        let (same, none) = split_history(whole.clone(), 0);
+        assert!(none.is_empty());
+        assert_eq!(same.windows[0].states, whole.windows[0].states);
     }
 }
