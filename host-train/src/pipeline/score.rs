@@ -259,26 +259,12 @@ fn adapted_errors(
     let n = data.window_len.saturating_sub(1);
     let mut acc = Acc::new(n);
     for (w, h) in data.windows.iter().zip(histories) {
-        let Some(s0) = w.states.first() else { continue };
         let c = history_force_offset(model, response, h, dt);
         let mut adapted = response.clone();
         for (b, x) in adapted.accel_bias.iter_mut().zip(c.iter()) {
             *b += *x;
         }
-        let u = w.u.get(..n).unwrap_or(&w.u);
-        let mut last = (0, *s0);
-        crate::train::response::rollout(model, &adapted, s0, u, dt, |k, s| {
-            if let Some(t) = w.states.get(k + 1) {
-                acc.add(k, s, t);
-            }
-            last = (k + 1, *s);
-        });
-        for k in last.0..n {
-            if let Some(t) = w.states.get(k + 1) {
-                acc.add(k, &last.1, t);
-            }
-        }
-        acc.n += 1;
+        crate::train::response::add_window(&mut acc, model, &adapted, w, dt);
     }
     acc.finish()
 }

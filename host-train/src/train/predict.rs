@@ -50,6 +50,11 @@ impl Acc {
         }
     }
 
+    /// Predicted steps per window.
+    pub fn steps(&self) -> usize {
+        self.sum.len()
+    }
+
     /// Adds step `k` (0-based) of one window.
     pub fn add(&mut self, k: usize, pred: &State, truth: &State) {
         let world = |s: &State| s.rot * s.v_body_m_s;

@@ -241,25 +241,38 @@ pub fn response_errors<M: HamiltonianModel>(
     let n = data.window_len.saturating_sub(1);
     let mut acc = Acc::new(n);
     for w in ids.iter().filter_map(|&i| data.windows.get(i)) {
-        let Some(s0) = w.states.first() else { continue };
-        let u = w.u.get(..n).unwrap_or(&w.u);
-        let mut last = (0, *s0);
-        rollout(base, response, s0, u, dt, |k, s| {
-            if let Some(t) = w.states.get(k + 1) {
-                acc.add(k, s, t);
-            }
-            last = (k + 1, *s);
-        });
-        // A rollout that diverged counts with its last finite state at every later step, so
-        // that a diverging response scores badly instead of dropping its worst windows.
-        for k in last.0..n {
-            if let Some(t) = w.states.get(k + 1) {
-                acc.add(k, &last.1, t);
-            }
-        }
-        acc.n += 1;
+        add_window(&mut acc, base, response, w, dt);
     }
     acc.finish()
+}
+
+/// Adds the errors of `base` with `response` (a = 0) on window `w` to `acc` (its first
+/// `acc`-many steps), rolled out at `dt_s` from the window's first state. A rollout that
+/// diverged counts with its last finite state at every later step, so that a diverging
+/// response scores badly instead of dropping its worst windows.
+pub fn add_window<M: HamiltonianModel>(
+    acc: &mut Acc,
+    base: &M,
+    response: &Response,
+    w: &super::data::Window,
+    dt_s: f32,
+) {
+    let Some(s0) = w.states.first() else { return };
+    let n = acc.steps();
+    let u = w.u.get(..n).unwrap_or(&w.u);
+    let mut last = (0, *s0);
+    rollout(base, response, s0, u, dt_s, |k, s| {
+        if let Some(t) = w.states.get(k + 1) {
+            acc.add(k, s, t);
+        }
+        last = (k + 1, *s);
+    });
+    for k in last.0..n {
+        if let Some(t) = w.states.get(k + 1) {
+            acc.add(k, &last.1, t);
+        }
+    }
+    acc.n += 1;
 }
 
 /// What [`fit`] is told.
