@@ -45,6 +45,9 @@ fn truth() -> Response {
     r.accel_per_velocity[3][1] = 5.0;
     r.accel_per_velocity[4][0] = -5.0;
     r.accel_bias[3] = 0.4;
+    // The attitude loop's pull toward level: ω̇ₓ ← −5 (Rᵀe₃)ᵧ, ω̇ᵧ ← +5 (Rᵀe₃)ₓ.
+    r.accel_per_tilt[0][1] = -5.0;
+    r.accel_per_tilt[1][0] = 5.0;
     r
 }
 
@@ -142,6 +145,21 @@ fn the_fit_recovers_a_response_it_did_not_start_from() {
         truth.torque_lag_s
     );
     assert!((fitted.thrust_gain - truth.thrust_gain).abs() < 0.01);
+    for (row, (got, want)) in fitted
+        .accel_per_tilt
+        .iter()
+        .zip(&truth.accel_per_tilt)
+        .enumerate()
+    {
+        for k in 0..2 {
+            assert!(
+                (got[k] - want[k]).abs() < 0.25,
+                "tilt term ({row}, {k}): {} vs {}",
+                got[k],
+                want[k]
+            );
+        }
+    }
     assert!(
         (fitted.thrust_lag_s - truth.thrust_lag_s).abs() < 0.005,
         "thrust lag {} vs {}",

@@ -10,11 +10,16 @@
 //!   about 70 ms late;
 //! - a body wrench linear in the body velocity ζ = (v, ω), the rotors' drag and flapping
 //!   moment and the rate damping, written as an acceleration A ζ (`accel_per_velocity`);
-//! - a constant body acceleration c (`accel_bias`): a centre-of-mass offset, a trim torque.
+//! - a constant body acceleration c (`accel_bias`): a centre-of-mass offset, a trim torque;
+//! - an angular acceleration linear in the tilt, K (`accel_per_tilt`): the vehicle's own
+//!   attitude loop holding it near level. The loop acts through the rotors, so a perfect log of
+//!   their speeds would carry it in the torques; the benchmark's logs carry 8–34 % of the
+//!   torques, and K takes the rest of the loop's effect as the state feedback it is
+//!   (−5.5 and −5.8 rad/s² per rad on roll and pitch there; docs/benchmark.md).
 //!
 //! So the predicted motion is the blob's dynamics under u' = [k_f f̄; k_τ ∘ τ̄] with
 //! τ̄̇ = (τ − τ̄)/T and the same for f̄ with T_f (backward Euler at the log's rate), plus
-//! ζ̇ += A ζ + c. With the identity response ([`Response::identity`]) it is the blob's own
+//! ζ̇ += A ζ + c, ω̇ += K (Rᵀe₃)ₓᵧ. With the identity response ([`Response::identity`]) it is the blob's own
 //! prediction. The response is host-side: the flight core's control path does not
 //! use it (the controller flies the blob's M, g and W; docs/benchmark.md says why).
 //!
@@ -45,10 +50,18 @@ pub struct Response {
     /// T_f (s): the first-order lag the thrust acts through (0: none).
     #[serde(default)]
     pub thrust_lag_s: f32,
+    /// K: body angular acceleration (rad/s²) per unit of the world vertical's body x and y
+    /// components, (Rᵀe₃)ₓ ≈ −pitch and (Rᵀe₃)ᵧ ≈ roll; row-major 3×2, rows ω̇ₓ, ω̇ᵧ, ω̇_z. The
+    /// onboard attitude loop's pull toward level, which the measured rotor speeds carry too
+    /// little of (module docs).
+    #[serde(default)]
+    pub accel_per_tilt: [[f32; 2]; 3],
 }
 
-/// Number of parameters: k_f, k_τ (3), T, A (36), c (6), T_f.
-pub const PARAMS: usize = 48;
+/// Number of parameters: k_f, k_τ (3), T, A (36), c (6), T_f, K (6).
+pub const PARAMS: usize = 54;
+/// Indices of K in the parameters.
+const TILT: std::ops::Range<usize> = 48..54;
 /// Index of T in the parameters.
 const TORQUE_LAG: usize = 4;
 /// Index of T_f in the parameters.
@@ -71,10 +84,13 @@ pub enum ForceTerms {
     None,
 }
 
-/// True if parameter `i` stays where it starts: [`FIXED`], and A's force-row entries that
-/// `force` leaves out.
-fn is_fixed(i: usize, force: ForceTerms) -> bool {
+/// True if parameter `i` stays where it starts: [`FIXED`], A's force-row entries that `force`
+/// leaves out, and K ([`TILT`]) unless `tilt`.
+fn is_fixed(i: usize, force: ForceTerms, tilt: bool) -> bool {
     if FIXED.contains(&i) {
+        return true;
+    }
+    if !tilt && TILT.contains(&i) {
         return true;
     }
     if !(5..23).contains(&i) {
@@ -98,6 +114,7 @@ impl Response {
             accel_per_velocity: [[0.0; 6]; 6],
             accel_bias: [0.0; 6],
             thrust_lag_s: 0.0,
+            accel_per_tilt: [[0.0; 2]; 3],
         }
     }
 
@@ -110,7 +127,8 @@ impl Response {
             .chain([self.torque_lag_s])
             .chain(self.accel_per_velocity.into_iter().flatten())
             .chain(self.accel_bias)
-            .chain([self.thrust_lag_s]);
+            .chain([self.thrust_lag_s])
+            .chain(self.accel_per_tilt.into_iter().flatten());
         for (o, v) in p.iter_mut().zip(flat) {
             *o = f64::from(v);
         }
@@ -135,6 +153,11 @@ impl Response {
             *v = next();
         }
         r.thrust_lag_s = next().max(0.0);
+        for row in r.accel_per_tilt.iter_mut() {
+            for v in row.iter_mut() {
+                *v = next();
+            }
+        }
         r
     }
 
@@ -180,6 +203,10 @@ impl<M: HamiltonianModel> HamiltonianModel for WithVelocityTerm<'_, M> {
             *o = row.iter().zip(&z).map(|(a, b)| a * b).sum::<f32>() + c;
         }
         d.v_dot_m_s2 += Vector3::new(acc[0], acc[1], acc[2]);
+        let down = state.rot.transpose() * Vector3::z();
+        for (o, k) in acc[3..].iter_mut().zip(&r.accel_per_tilt) {
+            *o += k[0] * down.x + k[1] * down.y;
+        }
         d.w_dot_rad_s2 += Vector3::new(acc[3], acc[4], acc[5]);
         d
     }
@@ -287,6 +314,9 @@ pub struct FitConfig {
     pub threads: usize,
     /// Which force terms of A the fit uses (default: the drag per axis).
     pub force: ForceTerms,
+    /// Fit K, the angular acceleration with tilt (default true; false holds it where it
+    /// starts).
+    pub tilt: bool,
 }
 
 impl Default for FitConfig {
@@ -296,6 +326,7 @@ impl Default for FitConfig {
             scales: [0.1, 0.5, 0.2, 0.6],
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             force: ForceTerms::default(),
+            tilt: true,
         }
     }
 }
@@ -488,7 +519,7 @@ fn jacobian<M: HamiltonianModel + Sync>(
     cfg: &FitConfig,
 ) -> DMatrix<f64> {
     let column = |i: usize| -> Vec<f64> {
-        if is_fixed(i, cfg.force) {
+        if is_fixed(i, cfg.force, cfg.tilt) {
             return vec![0.0; r.len()];
         }
         let h = 1e-3 * p[i].abs().max(1.0);
