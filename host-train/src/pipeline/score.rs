@@ -21,8 +21,8 @@
 //! velocities integrate to (trapezoid, from the window's first position), against the logged
 //! position. It reads the future velocities, so it is not a predictor: it measures how well the
 //! log's velocity and position agree, an error a predictor that starts from the logged
-//! velocity will hardly beat (the nano-drone benchmark's melon flights: 0.036 m at 50 steps,
-//! a third of the best predictor's; docs/benchmark.md).
+//! velocity will hardly beat (the nano-drone benchmark's melon flights: 0.037 m at 50 steps,
+//! 40 % of the best predictor's; docs/benchmark.md).
 //!
 //! For each predicted step k = 1 … N it reports the mean (MAE) and the root mean square (RMSE)
 //! over windows of the error norms: position ‖p̂ − p‖ (m), velocity ‖R̂ v̂ − R v‖ (world frame,
@@ -306,8 +306,8 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         None => None,
     };
     // With a history, windows are cut longer and split: the first `k` steps are the history.
-    let peek = dataset_rate(&args.data)?;
-    let k = history.map_or(0, |h| (h * peek).round().max(1.0) as usize);
+    let rate_hz = dataset_rate(&args.data)?;
+    let k = history.map_or(0, |h| (h * rate_hz).round().max(1.0) as usize);
     let spec = WindowSpec {
         len: args.horizon + 1 + k,
         stride: args.stride,
