@@ -171,11 +171,6 @@ pub fn logged_velocity_position_errors(data: &Windows, ids: &[usize]) -> Vec<f64
     sum.into_iter().map(|e| e / m).collect()
 }
 
-/// The dataset's sample rate (Hz), from its manifest.
-fn dataset_rate(dir: &Path) -> Result<f64> {
-    Ok(crate::io::dataset::load_manifest(dir)?.sample_hz)
-}
-
 /// Splits each window of `data` into its first `k` steps (the history, `k` + 1 states and `k`
 /// inputs) and the rest (the window scored, which starts where the history ends).
 fn split_history(mut data: Windows, k: usize) -> (Windows, Vec<Window>) {
@@ -298,16 +293,15 @@ pub fn run(args: &ScoreArgs) -> Result<Score> {
         bail!("--horizon and --stride must be at least 1");
     }
     let model = load_learned(&args.weights)?;
-    let history = match args.history_s {
-        Some(h) if !(h.is_finite() && h > 0.0) => {
-            bail!("--history-s must be a positive number of seconds (got {h})")
-        }
-        Some(h) => Some(h),
-        None => None,
-    };
     // With a history, windows are cut longer and split: the first `k` steps are the history.
-    let rate_hz = dataset_rate(&args.data)?;
-    let k = history.map_or(0, |h| (h * rate_hz).round().max(1.0) as usize);
+    let k = match args.history_s {
+        None => 0,
+        Some(h) if h.is_finite() && h > 0.0 => {
+            let rate_hz = crate::io::dataset::load_manifest(&args.data)?.sample_hz;
+            (h * rate_hz).round().max(1.0) as usize
+        }
+        Some(h) => bail!("--history-s must be a positive number of seconds (got {h})"),
+    };
     let spec = WindowSpec {
         len: args.horizon + 1 + k,
         stride: args.stride,

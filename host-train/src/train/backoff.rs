@@ -81,29 +81,21 @@ pub fn candidates(learned: &ModelWeights, a: &[[f32; FEATURES]], backoff: bool) 
         return out;
     }
     let (p, rank) = excited_subspace(a);
-    let excited = learned.with_features_in_subspace(&p);
-    if rank == 0 {
-        // Nothing excited: only the nominal features remain to try.
-        out.push(Candidate {
-            excited_dims: 0,
-            kept: 0.0,
-            weights: learned.with_features_toward_nominal(0.0),
-        });
-        return out;
-    }
-    if rank < FEATURES {
-        out.push(Candidate {
-            excited_dims: rank,
-            kept: 1.0,
-            weights: excited,
-        });
-    }
-    for keep in BACKOFF_KEEP {
-        out.push(Candidate {
+    // With nothing excited, only the nominal features remain to try.
+    if rank > 0 {
+        let excited = learned.with_features_in_subspace(&p);
+        if rank < FEATURES {
+            out.push(Candidate {
+                excited_dims: rank,
+                kept: 1.0,
+                weights: excited,
+            });
+        }
+        out.extend(BACKOFF_KEEP.map(|keep| Candidate {
             excited_dims: rank,
             kept: keep,
             weights: excited.with_features_toward_nominal(keep),
-        });
+        }));
     }
     out.push(Candidate {
         excited_dims: 0,
