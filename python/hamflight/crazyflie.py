@@ -13,15 +13,25 @@ The memory layout and protocol are the shim's (``firmware/bitcraze-app/hamflight
 staging slot at 0x1000. cflib splits every read and write into 24-byte packets.
 
 cflib is an optional dependency: ``pip install 'hamflight[crazyflie]'``. Everything but the
-connection itself (:func:`main`) takes cflib's objects as arguments, so the tests drive it with
+connection itself (:class:`Link`) takes cflib's objects as arguments, so the tests drive it with
 cflib's own :class:`cflib.crazyflie.mem.Memory` over a fake link.
+
+Errors (:func:`main`): one line on stderr, ``hamflight-cf: error: <cause>``, never a traceback
+(cflib's own logging and thread exceptions are silenced unless ``--verbose``); exit status 2 for
+usage errors, all found before connecting (arguments, URI, ``name=value``, the blob file), 1 for
+failures at run time (cflib missing, no dongle, no answer, link lost, upload rejected), 130 for
+Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import logging
 import math
+import os
+import re
 import struct
 import sys
 import threading
@@ -29,6 +39,7 @@ import time
 import zlib
 from dataclasses import dataclass
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, TextIO, Tuple
+from urllib.parse import urlsplit
 
 #: MEM_TYPE_APP (crazyflie-firmware mem.h; cflib MemoryElement.TYPE_APP).
 MEM_TYPE_APP = 0x18
@@ -261,8 +272,10 @@ LOG_BLOCKS: List[Tuple[str, List[Tuple[str, str]]]] = [
 ]
 TYPE_BYTES = {"float": 4, "FP16": 2, "uint8_t": 1, "uint32_t": 4}
 LOG_MAX_PAYLOAD_BYTES = 26
-#: cflib's log period is in units of 10 ms: 100 Hz is the fastest any block can run.
+#: cflib's log period is in units of 10 ms: 100 Hz is the fastest any block can run (and one
+#: byte of them, 2.55 s, the slowest; the tool takes 1 Hz as its floor).
 MAX_LOG_RATE_HZ = 100.0
+MIN_LOG_RATE_HZ = 1.0
 G_M_S2 = 9.81
 
 
@@ -309,10 +322,10 @@ class CsvLogWriter:
 
 
 def log_configs(rate_hz: float):
-    """cflib LogConfigs for :data:`LOG_BLOCKS` at ``rate_hz`` (at most 100 Hz)."""
+    """cflib LogConfigs for :data:`LOG_BLOCKS` at ``rate_hz`` (1..100 Hz)."""
     from cflib.crazyflie.log import LogConfig
 
-    if not 0 < rate_hz <= MAX_LOG_RATE_HZ:
+    if not MIN_LOG_RATE_HZ <= rate_hz <= MAX_LOG_RATE_HZ:
         raise ValueError(f"rate {rate_hz} Hz: cflib's log period is a multiple of 10 ms, 1..100 Hz")
     period_ms = int(round(1000.0 / rate_hz / 10.0)) * 10
     configs = []
@@ -324,6 +337,22 @@ def log_configs(rate_hz: float):
     return configs
 
 
+# ---- errors ----
+
+
+class CliError(Exception):
+    """A failure ``hamflight-cf`` reports as one line on stderr, exiting with ``code``: 1, a failure
+    at run time (no dongle, no answer, link lost, upload rejected)."""
+
+    code = 1
+
+
+class UsageError(CliError, ValueError):
+    """A bad command line or input file, found before connecting: exit status 2, argparse's."""
+
+    code = 2
+
+
 # ---- parameters ----
 
 #: The shim's parameters (group hamflight), hamflight_oot.c's PARAM_ADD list.
@@ -331,16 +360,249 @@ PARAMS = [
     "kp", "kv", "kR", "kw", "maxTilt", "cp", "cv", "cR", "cw", "aMax", "adapt", "reset",
     "airHeight", "leash", "law", "qF", "qT", "rF", "rT", "revert",
 ]
+PARAM_GROUP = "hamflight"
+#: The PARAM_UINT8 ones (0..255); the rest are PARAM_FLOAT.
+PARAM_UINT8 = ("adapt", "reset", "law", "revert")
 
 
 def parse_assignments(items: Sequence[str]) -> List[Tuple[str, str]]:
+    """``name=value`` items as (name, value): ``name`` one of :data:`PARAMS` (``hamflight.``
+    optional), ``value`` a number cflib can send as its type (an integer 0..255 for the uint8
+    ones, a finite number for the floats). Raises :class:`UsageError` (a ValueError) naming the
+    item, so that nothing is sent unless every assignment is good."""
     out = []
     for item in items:
         name, sep, value = item.partition("=")
-        if not sep or name not in PARAMS:
-            raise ValueError(f"{item!r}: expected name=value with name one of {', '.join(PARAMS)}")
+        if not sep or not name:
+            raise UsageError(f"{item!r}: expected name=value (e.g. law=1)")
+        group, dot, short = name.rpartition(".")
+        if dot:
+            if group != PARAM_GROUP:
+                raise UsageError(f"{item!r}: unknown parameter group {group!r}; hamflight-cf sets the "
+                                 f"{PARAM_GROUP} group only ({PARAM_GROUP}.NAME=VALUE or NAME=VALUE)")
+            name = short
+        if name not in PARAMS:
+            raise UsageError(f"{item!r}: unknown parameter {name!r}; the {PARAM_GROUP} group has: {' '.join(PARAMS)}")
+        if name in PARAM_UINT8:
+            try:
+                ok = 0 <= int(value) <= 255
+            except ValueError:
+                ok = False
+            if not ok:
+                raise UsageError(f"{item!r}: {name} takes an integer 0..255")
+        else:
+            try:
+                ok = math.isfinite(float(value))
+            except ValueError:
+                ok = False
+            if not ok:
+                raise UsageError(f"{item!r}: {name} takes a finite number")
         out.append((name, value))
     return out
+
+
+# ---- links ----
+
+#: The link schemes cflib's drivers open (cflib.crtp.init_drivers: radio, usb, udp, prrt, tcp;
+#: serial:// only when asked for, debug:// no longer exists).
+URI_FORMS = ("radio://DONGLE/CHANNEL[/RATE[/ADDRESS]] (e.g. radio://0/80/2M/E7E7E7E7E7), usb://N, "
+             "udp://HOST:PORT, tcp://HOST:PORT or prrt://IP:PORT")
+URI_SCHEMES = ("radio", "usb", "udp", "tcp", "prrt")
+
+
+def check_uri(uri: str) -> str:
+    """``uri`` if it has the shape cflib's driver for its scheme parses, else :class:`UsageError`
+    saying which part is wrong. cflib itself reports most of these as a traceback from its
+    driver (an unknown data rate it even takes silently as 2M)."""
+
+    def bad(why: str) -> UsageError:
+        return UsageError(f"bad URI {uri!r}: {why}")
+
+    scheme, sep, rest = uri.partition("://")
+    if not sep:
+        raise bad(f"expected {URI_FORMS}")
+    if scheme not in URI_SCHEMES:
+        raise bad(f"unknown scheme {scheme + '://'!r}; cflib opens {URI_FORMS}")
+    if scheme == "radio":
+        path, _, query = rest.partition("?")
+        parts = path.strip("/").split("/")
+        dongle, more = parts[0], parts[1:]
+        if not re.fullmatch(r"[0-9A-Za-z]+", dongle):
+            raise bad("DONGLE is the Crazyradio's index (0 for the first) or its serial number")
+        if not more:
+            raise bad("no channel: expected radio://DONGLE/CHANNEL[/RATE[/ADDRESS]], e.g. radio://0/80/2M/E7E7E7E7E7")
+        if len(more) > 3:
+            raise bad("expected radio://DONGLE/CHANNEL[/RATE[/ADDRESS]], e.g. radio://0/80/2M/E7E7E7E7E7")
+        if not re.fullmatch(r"[0-9]{1,3}", more[0]) or int(more[0]) > 125:
+            raise bad(f"channel {more[0]!r}: expected 0..125 (2400..2525 MHz)")
+        if len(more) > 1 and more[1] not in ("250K", "1M", "2M"):
+            raise bad(f"data rate {more[1]!r}: expected 250K, 1M or 2M")
+        if len(more) > 2 and not re.fullmatch(r"[0-9A-Fa-f]{1,10}", more[2]):
+            raise bad(f"address {more[2]!r}: expected up to 10 hex digits (the factory one is E7E7E7E7E7)")
+        for kv in filter(None, query.split("&")):
+            key, _, value = kv.partition("=")
+            if key == "rate_limit" and not re.fullmatch(r"[0-9]+", value):
+                raise bad("rate_limit takes a whole number of packets per second")
+    elif scheme == "usb":
+        if not re.fullmatch(r"[0-9]+", rest):
+            raise bad("expected usb://N, N the index of the Crazyflie on USB (usb://0 for the first)")
+    elif scheme == "prrt":
+        if not re.fullmatch(r"[0-9]{1,3}(\.[0-9]{1,3}){3}:[0-9]{1,5}(/[0-9]{1,6})?", rest):
+            raise bad("expected prrt://IP:PORT[/DELAY_MS]")
+    else:
+        parts = urlsplit(uri)
+        try:
+            port = parts.port  # None without one, ValueError outside 0..65535
+        except ValueError:
+            port = None
+        if not parts.hostname or not port or parts.path not in ("", "/"):
+            raise bad(f"expected {scheme}://HOST:PORT, PORT 1..65535")
+    return uri
+
+
+def _first_line(text) -> str:
+    """The first non-empty line of an exception's text."""
+    return next((line.strip() for line in str(text).splitlines() if line.strip()), "")
+
+
+def cflib_message(text: str) -> str:
+    """One line from a cflib error message, which carries a traceback: "Couldn't load link
+    driver: <exception>" (a driver that raised), or "<what>\nException:<exception>" (a driver
+    thread's link error), each followed by the traceback, which is dropped."""
+    head = str(text).split("Traceback (most recent call last)", 1)[0]
+    lines = [line.strip() for line in head.splitlines() if line.strip()]
+    prefix = "Couldn't load link driver:"
+    if lines and lines[0].startswith(prefix):
+        lines[0] = lines[0][len(prefix):].strip()
+    lines = [line[len("Exception:"):].strip() if line.startswith("Exception:") else line for line in lines]
+    if not lines:
+        return "link error"
+    return lines[0] if len(lines) < 2 else f"{lines[0]} ({'; '.join(lines[1:])})"
+
+
+def link_failure(uri: str, message: str) -> str:
+    """The cause of a failed connection, in one line, from cflib's ``connection_failed`` message."""
+    msg = cflib_message(message)
+    low = msg.lower()
+    if "cannot find a crazyradio dongle" in low:
+        return "no Crazyradio dongle found: plug one in (on Linux, Bitcraze's udev rules let a user open it)"
+    if "cannot find radio with serial" in low or low.startswith("cannot find crazyradio"):
+        return f"no Crazyradio with the serial number in {uri} is plugged in"
+    if "access denied" in low or "insufficient permissions" in low or "errno 13" in low:
+        return ("the Crazyradio dongle is not accessible (permission denied): install Bitcraze's udev "
+                "rules for it, then replug it")
+    if "too many packets lost" in low:
+        return (f"no Crazyflie answered at {uri}: is it switched on, and are the channel, data rate "
+                "and address its own?")
+    if "unplugged" in low or "dongle communication error" in low:
+        return f"the Crazyradio dongle stopped answering while connecting to {uri} (unplugged?)"
+    if low.startswith("could not open usb"):
+        return f"no Crazyflie answered on USB at {uri}: is it plugged in and switched on?"
+    if "connection refused" in low:
+        return f"no Crazyflie answered at {uri} (connection refused: nothing listens there)"
+    if "no driver found" in low:
+        return f"cflib has no driver for {uri}"
+    return f"could not open the link to {uri}: {msg}"
+
+
+#: How long connecting may take: the answer to the first packet and cflib's download of the
+#: log and parameter tables (TOCs), a few seconds over the radio.
+CONNECT_TIMEOUT_S = 20.0
+
+
+def _import_cflib():
+    """cflib's link layer, its drivers initialised once; :class:`CliError` if cflib is missing."""
+    try:
+        import cflib.crtp
+        from cflib.crazyflie import Crazyflie
+    except ImportError as e:
+        if e.name is None or e.name.split(".")[0] == "cflib":
+            raise CliError("cflib is not installed: pip install 'hamflight[crazyflie]'") from None
+        raise CliError(f"cflib could not be imported ({e}): pip install 'hamflight[crazyflie]'") from None
+    global _drivers_ready
+    if not _drivers_ready:
+        cflib.crtp.init_drivers()
+        _drivers_ready = True
+    return Crazyflie
+
+
+_drivers_ready = False
+
+
+class Link:
+    """A cflib connection to one Crazyflie (``cf``) as a context manager. Unlike cflib's
+    SyncCrazyflie it gives up after ``timeout_s`` (SyncCrazyflie waits forever for a vehicle
+    that never answers), raises :class:`CliError` with the cause in one line, and records in
+    ``lost`` why the link dropped later; an error raised inside the block once the link is lost
+    (a timeout, say) becomes "the link was lost" unless it is a :class:`CliError` already."""
+
+    def __init__(self, uri: str, timeout_s: float = CONNECT_TIMEOUT_S):
+        self.uri = uri
+        self.timeout_s = timeout_s
+        self.cf = None
+        self.lost: Optional[str] = None
+
+    def __enter__(self) -> "Link":
+        crazyflie = _import_cflib()
+        self.cf = cf = crazyflie()
+        done = threading.Event()
+        failures: List[str] = []
+
+        def failed(_uri, message):
+            failures.append(message)
+            done.set()
+
+        def lost(_uri, message):
+            self.lost = cflib_message(message)
+
+        cf.connected.add_callback(lambda _uri: done.set())
+        cf.connection_failed.add_callback(failed)
+        cf.connection_lost.add_callback(lost)
+        try:
+            cf.open_link(self.uri)
+            if not done.wait(self.timeout_s):
+                raise CliError(f"no Crazyflie answered at {self.uri} within {self.timeout_s:g} s: is it "
+                               "switched on, and is the URI its own?")
+            if failures:
+                raise CliError(link_failure(self.uri, failures[0]))
+        except BaseException:
+            self._close()
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self._close()
+        lost_it = exc_type is not None and issubclass(exc_type, Exception) and not issubclass(exc_type, CliError)
+        if self.lost is not None and lost_it:
+            raise CliError(f"the link to {self.uri} was lost: {self.lost}") from exc
+        return False
+
+    def _close(self) -> None:
+        try:
+            self.cf.close_link()
+        except Exception:  # closing a broken link must not hide why it broke
+            pass
+
+
+@contextlib.contextmanager
+def _quiet_cflib(verbose: bool):
+    """cflib logs its failures with tracebacks through ``logging`` (which, with no handler
+    configured, prints warnings and errors to stderr) and its driver threads can die with one: a
+    NullHandler on the ``cflib`` logger and a silent ``threading.excepthook`` leave stderr to
+    :func:`main`'s one line. ``verbose`` shows them all instead."""
+    if verbose:
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
+        yield
+        return
+    log = logging.getLogger("cflib")
+    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+        log.addHandler(logging.NullHandler())
+    hook = threading.excepthook
+    threading.excepthook = lambda _args: None
+    try:
+        yield
+    finally:
+        threading.excepthook = hook
 
 
 # ---- command line ----
@@ -353,102 +615,226 @@ the compiled-in blob again, `hamflight-cf params URI revert=1` does so at once o
 Log rate: cflib's log blocks carry at most 26 payload bytes each and run at most every 10 ms,
 so the 17 values the importer needs take three blocks at up to 100 Hz (300 packets/s, within
 the radio's roughly 1,000 packets/s, shared with setpoints and parameters); the controller itself
-runs at 500 Hz. Requires cflib: pip install 'hamflight[crazyflie]'."""
+runs at 500 Hz. Requires cflib: pip install 'hamflight[crazyflie]'.
+URI: radio://DONGLE/CHANNEL/RATE/ADDRESS, e.g. radio://0/80/2M/E7E7E7E7E7 (the first Crazyradio,
+channel 80 = 2480 MHz, 2 Mbit/s, the factory address); usb://0; udp://HOST:PORT; tcp://HOST:PORT.
+Exit status: 0 done; 1 a failure at run time (cflib missing, no dongle, no answer, link lost,
+upload rejected); 2 a usage error, found before connecting (bad arguments, URI or name=value,
+a missing or corrupt blob file); 130 interrupted (Ctrl-C). Errors are one line on stderr;
+--verbose adds cflib's log messages and tracebacks."""
 
 
-def _connect(uri: str):
+def _number(what: str, unit: str, lo: float, hi: float = math.inf, lo_open: bool = False, why: str = ""):
+    """An argparse type: a finite number in [lo, hi] (or (lo, hi] with ``lo_open``)."""
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number ({what} in {unit})") from None
+        ok = math.isfinite(x) and (lo < x if lo_open else lo <= x) and x <= hi
+        if not ok:
+            span = f"{lo:g}..{hi:g} {unit}" if hi < math.inf else (f"more than {lo:g} {unit}" if lo_open else f"at least {lo:g} {unit}")
+            raise argparse.ArgumentTypeError(f"{what} {text} {unit} is out of range: {span}{why}")
+        return x
+
+    return parse
+
+
+def read_blob(path: str) -> bytes:
+    """The blob file, checked (header, length, CRC) before anything is sent; :class:`UsageError`
+    naming the file and the cause otherwise."""
     try:
-        import cflib.crtp
-        from cflib.crazyflie import Crazyflie
-        from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
-    except ImportError as e:  # pragma: no cover - the message is the point
-        raise SystemExit(f"hamflight-cf needs cflib: pip install 'hamflight[crazyflie]' ({e})")
-    cflib.crtp.init_drivers()
-    return SyncCrazyflie(uri, cf=Crazyflie())
+        with open(path, "rb") as f:
+            blob = f.read()
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise UsageError(f"{path}: is a directory, not a .hfw weight blob") from None
+    except OSError as e:
+        raise UsageError(f"{path}: cannot read it ({e.strerror or e})") from None
+    try:
+        blob_crc(blob)
+    except UploadError as e:
+        raise UsageError(f"{path}: {e}") from None
+    return blob
+
+
+def check_out(path: str) -> str:
+    """``path`` if a CSV can be written there (its directory exists and is writable), checked
+    before connecting; the file itself is created only once the link is up."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise UsageError(f"--out {path}: is a directory")
+    if not os.path.isdir(folder):
+        raise UsageError(f"--out {path}: no directory {folder}")
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UsageError(f"--out {path}: not writable")
+    return path
 
 
 def _cmd_upload(args) -> int:
-    blob = open(args.blob, "rb").read()
+    check_uri(args.uri)
+    blob = read_blob(args.blob)
     print(f"{args.blob}: {len(blob)} B, crc {blob_crc(blob):08X}")
-    with _connect(args.uri) as scf:
-        app = AppMemory.find(scf.cf.mem)
+    with Link(args.uri, args.timeout_s) as link:
+        app = AppMemory.find(link.cf.mem)
         upload(app, blob, wait_active_s=args.wait_s)
     return 0
 
 
 def _cmd_log(args) -> int:
-    with _connect(args.uri) as scf, open(args.out, "w", newline="") as f:
-        w = CsvLogWriter(f)
-        lock = threading.Lock()
-        configs = log_configs(args.rate_hz)
-        for lc in configs:
-            scf.cf.log.add_config(lc)
-
-            def cb(ts, data, conf, w=w):
-                with lock:
-                    w.add(conf.name, ts, data)
-
-            lc.data_received_cb.add_callback(cb)
-        for lc in configs:
-            lc.start()
-        print(f"logging {len(configs)} blocks at {args.rate_hz:g} Hz to {args.out}; Ctrl-C stops")
-        t0 = time.monotonic()
+    check_uri(args.uri)
+    check_out(args.out)
+    with Link(args.uri, args.timeout_s) as link:
+        toc = link.cf.log.toc
+        missing = [v for _, vs in LOG_BLOCKS for v, _ in vs if toc.get_element_by_complete_name(v) is None]
+        if missing:
+            raise CliError(f"the Crazyflie does not log {', '.join(missing)}: is the hamflight app flashed?")
         try:
-            while args.seconds is None or time.monotonic() - t0 < args.seconds:
-                time.sleep(0.2)
-        except KeyboardInterrupt:
-            pass
-        for lc in configs:
-            lc.stop()
-        print(f"{w.rows} rows, {w.dropped} dropped (blocks out of step)")
+            f = open(args.out, "w", newline="")
+        except OSError as e:
+            raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
+        with f:
+            w = CsvLogWriter(f)
+            lock = threading.Lock()
+            configs = log_configs(args.rate_hz)
+            for lc in configs:
+                link.cf.log.add_config(lc)
+
+                def cb(ts, data, conf, w=w):
+                    with lock:
+                        w.add(conf.name, ts, data)
+
+                lc.data_received_cb.add_callback(cb)
+            for lc in configs:
+                lc.start()
+            rate = 1000.0 / configs[0].period_in_ms
+            print(f"logging {len(configs)} blocks at {rate:g} Hz to {args.out}; Ctrl-C stops")
+            t0 = time.monotonic()
+            try:
+                while args.seconds is None or time.monotonic() - t0 < args.seconds:
+                    if link.lost is not None:
+                        break
+                    time.sleep(0.2)
+            except KeyboardInterrupt:
+                pass
+            if link.lost is None:
+                for lc in configs:
+                    lc.stop()
+            print(f"{w.rows} rows, {w.dropped} dropped (blocks out of step)")
+        if link.lost is not None:
+            raise CliError(f"the link to {args.uri} was lost after {w.rows} rows (kept in {args.out}): {link.lost}")
     return 0
 
 
 def _cmd_params(args) -> int:
+    check_uri(args.uri)
     sets = parse_assignments(args.set)
-    with _connect(args.uri) as scf:
+    with Link(args.uri, args.timeout_s) as link:
+        param = link.cf.param
+        if param.toc.get_element_by_complete_name(f"{PARAM_GROUP}.{PARAMS[0]}") is None:
+            raise CliError(f"the Crazyflie has no {PARAM_GROUP} parameters: is the hamflight app flashed?")
         for name, value in sets:
-            scf.cf.param.set_value(f"hamflight.{name}", value)
+            param.set_value(f"{PARAM_GROUP}.{name}", value)
         time.sleep(0.2)
         for name in PARAMS:
-            print(f"hamflight.{name} = {scf.cf.param.get_value(f'hamflight.{name}')}")
+            print(f"{PARAM_GROUP}.{name} = {param.get_value(f'{PARAM_GROUP}.{name}')}")
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its errors as one line (no usage block), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"hamflight-cf: error: {message}; see '{self.prog} --help'\n")
+
+
+URI_HELP = ("the Crazyflie's link: radio://DONGLE/CHANNEL/RATE/ADDRESS, e.g. radio://0/80/2M/E7E7E7E7E7 "
+            "(the first Crazyradio, channel 80 = 2480 MHz, 2 Mbit/s, the factory address); usb://0 for "
+            "a USB cable; udp://HOST:PORT or tcp://HOST:PORT")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="hamflight-cf",
         description="hamflight on a Crazyflie over the radio (cflib): upload weight blobs, log flights "
         "as host-train import's CSV, show and set the hamflight parameters.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    sub = p.add_subparsers(dest="command", required=True)
-    u = sub.add_parser("upload", help="write a weight blob into the app's RAM slot; it flies once not airborne")
-    u.add_argument("uri", help="e.g. radio://0/80/2M/E7E7E7E7E7")
-    u.add_argument("blob", help="the .hfw weight blob (host-train train writes one)")
-    u.add_argument("--wait-s", type=float, default=5.0, help="how long to wait for the swap (default 5 s)")
+    common = _Parser(add_help=False)
+    common.add_argument("--timeout-s", type=_number("timeout", "s", 0.0, lo_open=True), default=CONNECT_TIMEOUT_S,
+                        metavar="S", help="seconds to wait for the Crazyflie to answer and send its log and "
+                        f"parameter tables when connecting (default {CONNECT_TIMEOUT_S:g})")
+    common.add_argument("-v", "--verbose", action="store_true",
+                        help="also show cflib's own log messages and tracebacks on stderr (for debugging)")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{upload,log,params}")
+    u = sub.add_parser(
+        "upload", parents=[common], help="write a weight blob into the app's RAM slot; it flies once not airborne",
+        description="Check a weight blob (header, length, CRC), write it into the hamflight app's staging "
+        "slot in RAM, read it back byte for byte, commit it and wait until the app flies it (the app swaps "
+        "it in only while the vehicle is not airborne; otherwise it is reported pending). RAM only: a reboot "
+        "flies the compiled-in blob again.")
+    u.add_argument("uri", help=URI_HELP)
+    u.add_argument("blob", help="the .hfw weight blob to fly (host-train train writes one)")
+    u.add_argument("--wait-s", type=_number("wait", "s", 0.0), default=5.0, metavar="S",
+                   help="seconds to wait after the commit for the app to swap the blob in (default 5); a "
+                   "vehicle in flight swaps it only after landing, and the blob is then reported pending")
     u.set_defaults(func=_cmd_upload)
-    lg = sub.add_parser("log", help="record a flight as host-train import's CSV")
-    lg.add_argument("uri")
-    lg.add_argument("--out", required=True, help="CSV file to write")
-    lg.add_argument("--rate-hz", type=float, default=100.0, help="1..100 Hz (default 100, cflib's fastest)")
-    lg.add_argument("--seconds", type=float, default=None, help="stop after this long (default: Ctrl-C)")
+    lg = sub.add_parser(
+        "log", parents=[common], help="record a flight as host-train import's CSV",
+        description="Log the state estimate, gyro, accelerometer and the hamflight controller's thrust "
+        "and torques as the CSV host-train import reads (t_s, position m, quaternion, velocity m/s, body "
+        "rates rad/s, thrust N, torques N m, specific force m/s^2), until --seconds or Ctrl-C.")
+    lg.add_argument("uri", help=URI_HELP)
+    lg.add_argument("--out", required=True, metavar="FILE.csv", help="CSV file to write (replaced if it exists)")
+    lg.add_argument("--rate-hz", type=_number(
+        "log rate", "Hz", MIN_LOG_RATE_HZ, MAX_LOG_RATE_HZ,
+        why=" (cflib runs a log block at most every 10 ms)"), default=MAX_LOG_RATE_HZ, metavar="HZ",
+        help="log rate in Hz, 1..100 (default 100): cflib runs a log block at most every 10 ms, so 100 Hz "
+        "is the fastest (three blocks, 300 packets/s of the radio's roughly 1,000); other rates round to the "
+        "nearest whole number of 10 ms (30 Hz logs at 33.3 Hz)")
+    lg.add_argument("--seconds", type=_number("duration", "s", 0.0, lo_open=True), default=None, metavar="S",
+                    help="stop after this many seconds (default: at Ctrl-C)")
     lg.set_defaults(func=_cmd_log)
-    pa = sub.add_parser("params", help="show the hamflight parameters, after setting any name=value given")
-    pa.add_argument("uri")
-    pa.add_argument("set", nargs="*", help=f"name=value, name one of: {' '.join(PARAMS)}")
+    pa = sub.add_parser(
+        "params", parents=[common], help="show the hamflight parameters, after setting any name=value given",
+        description="Set the hamflight parameters given as name=value (all checked before connecting), "
+        "then print every one. revert=1 flies the compiled-in blob again (on the ground); law, adapt, "
+        "reset and revert are integers 0..255, the rest numbers.")
+    pa.add_argument("uri", help=URI_HELP)
+    pa.add_argument("set", nargs="*", metavar="name=value",
+                    help=f"a parameter to set, name one of: {' '.join(PARAMS)} (hamflight.name also works)")
     pa.set_defaults(func=_cmd_params)
     return p
 
 
+def _fail(message: str, code: int) -> int:
+    print(f"hamflight-cf: error: {message}", file=sys.stderr)
+    return code
+
+
 def main(argv: Optional[Iterable[str]] = None) -> int:
-    args = build_parser().parse_args(None if argv is None else list(argv))
+    """The console script: 0 done, 1 a failure at run time, 2 a usage error (argparse's, and the
+    checks made before connecting), 130 interrupted; every error is one line on stderr."""
     try:
-        return args.func(args)
-    except UploadError as e:
-        print(f"hamflight-cf: {e}", file=sys.stderr)
-        return 1
+        args = build_parser().parse_args(None if argv is None else list(argv))
+    except KeyboardInterrupt:
+        return _fail("interrupted", 130)
+    with _quiet_cflib(args.verbose):
+        try:
+            return args.func(args)
+        except KeyboardInterrupt:
+            return _fail("interrupted", 130)
+        except CliError as e:
+            return _fail(str(e), e.code)
+        except UploadError as e:
+            return _fail(str(e), 1)
+        except Exception as e:
+            if args.verbose:
+                raise
+            return _fail(f"{_first_line(e) or type(e).__name__} ({type(e).__name__}; --verbose shows the traceback)", 1)
 
 
 if __name__ == "__main__":
