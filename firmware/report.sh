@@ -18,12 +18,15 @@ cd "$(dirname "$0")"
 tools/ensure-target.sh
 
 extra="${FEATURES:-}"
+# NO_DEFAULT=1: without the default features (the composite law): the paper's gradient law alone.
+nodef=()
+if [ "${NO_DEFAULT:-0}" = 1 ]; then nodef=(--no-default-features); fi
 feat_board="${extra}"
 feat_bench="bench${extra:+,$extra}"
 
 echo "building (release) ..." >&2
-cargo build --release --bin crazyflie ${feat_board:+--features "$feat_board"} >&2
-cargo build --release --bin qemu --features "$feat_bench" >&2
+cargo build --release "${nodef[@]}" --bin crazyflie ${feat_board:+--features "$feat_board"} >&2
+cargo build --release "${nodef[@]}" --bin qemu --features "$feat_bench" >&2
 tdir="${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release"
 elf_board="$tdir/crazyflie"
 elf_qemu="$tdir/qemu"
@@ -53,7 +56,7 @@ cyc_low=""; cyc_mid=""; cyc_high=""; cyc_ins=""
 if [ "${CYCLES:-1}" != 0 ]; then
   if command -v python3 >/dev/null && command -v arm-none-eabi-objdump >/dev/null; then
     echo "tracing a 200-step bench for the cycle estimate ..." >&2
-    HAMFLIGHT_BENCH_STEPS=200 cargo build --release --bin qemu --features "$feat_bench" >&2
+    HAMFLIGHT_BENCH_STEPS=200 cargo build --release "${nodef[@]}" --bin qemu --features "$feat_bench" >&2
     cp "$elf_qemu" "$tdir/qemu-trace200"
     tline=$(python3 tools/trace-profile.py --summary "$tdir/qemu-trace200")
     tget() { sed -n "s/.* $1=\([0-9]*\).*/\1/p" <<<"$tline"; }
@@ -72,7 +75,7 @@ peak=$(get stack_peak); boot=$(get stack_boot_peak); ssize=$(get stack_size); bl
 # measure with the DWT cycle counter on the board: the telemetry's step_cost there is cycles).
 awk -v steps="$steps" -v total="$total" -v max="$max" -v min="$min" -v flash="$flash" \
     -v sram="$sram" -v peak="$peak" -v boot="$boot" -v ssize="$ssize" -v blob="$blob_len" \
-    -v features="${extra:-default}" -v cins="$cyc_ins" \
+    -v features="${extra:-default}${nodef[*]:+ (no default features: gradient law)}" -v cins="$cyc_ins" \
     -v clow="$cyc_low" -v cmid="$cyc_mid" -v chigh="$cyc_high" '
 function ins(t) { return t * 1000.0 / 168.0 }
 BEGIN {

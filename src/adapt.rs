@@ -11,8 +11,11 @@
 //! errors whatever their cause. A 0.5 m step makes e_p ≈ 0.5 m for a second, which the law reads
 //! as a disturbance and winds a up; unwinding takes seconds (`step`: 0.51 cm RMSE over t ≥ 5 s,
 //! against 0.0015 cm for the geometric controller without adaptation). Guards, for both laws:
-//! - the projection ‖a‖ ≤ a_max, and no tracking-error update while the mixer saturates (an
-//!   unreachable demand is no evidence about the disturbance), as before;
+//! - the projection ‖a‖ ≤ a_max, and, while the mixer saturates, the drives clipped to
+//!   [`AdaptationRates::saturated_drive_m`] and [`AdaptationRates::saturated_drive_rad`]: an
+//!   unreachable demand is weak evidence about the disturbance, but a fault that keeps the mixer
+//!   saturated is a disturbance, and a law switched off for the saturation's length can stay
+//!   frozen for good (a rotor loss behind a 72 ms motor lag rolled the vehicle over so);
 //! - optional (default off): the drives c_p e_p + c_v e_v and c_R e_R + c_ω e_ω clipped in norm
 //!   to c_p `drive_max_m` and c_R `drive_max_rad` (direction kept, so the cancellation between
 //!   e_p and e_v during a transient survives; clipping e_p and e_v separately made `step` worse,
@@ -23,9 +26,9 @@
 //!   a disturbance.
 //! - what does tell them apart is the **prediction error** of the composite law below: during a
 //!   transient the model predicts the measured force, so ε ≈ 0 and a stays put. With it `step`
-//!   holds 0.023 cm (`adaptive-composite`; 0.039 cm with the rebuilt weights); it is not the default law because it does not win
-//!   everywhere (see `motor_tau_s` and [`crate::control::Gains`]).
-//! - for the default (gradient) law, the answer is at the source of the transient: the
+//!   holds 0.023 cm (`adaptive-composite`; 0.039 cm with the rebuilt weights). It is the
+//!   default law ([`AdaptationLaw::default`]) where it is compiled in.
+//! - for the paper's gradient law, the answer is at the source of the transient: the
 //!   **setpoint shaping** of [`crate::shaping`] (a reference model, as model-reference adaptive
 //!   control has it) turns a setpoint jump into a motion the vehicle can fly, and the tracking
 //!   term is frozen while the shaped setpoint is more than 2 cm from the raw one. `step`: 0.51 →
@@ -95,6 +98,15 @@ pub struct AdaptationRates {
     /// the law all but stops while the vehicle is far from the reference (a transient, not a
     /// disturbance) and runs at full rate near it.
     pub soft_freeze_m: f32,
+    /// While the mixer saturates (roll/pitch or collective), the translational drive is clipped
+    /// to c_p · `saturated_drive_m` (m) instead of being switched off: an unreachable demand
+    /// must not wind the estimate up, but a fault that keeps the mixer saturated (a rotor loss)
+    /// must still be learned, or the estimate stays at its value from before the fault for as
+    /// long as the saturation lasts, which can be for good.
+    pub saturated_drive_m: f32,
+    /// The same bound on the rotational drive while the mixer saturates: c_R ·
+    /// `saturated_drive_rad`.
+    pub saturated_drive_rad: f32,
     /// Normalized gradient: ȧ is divided by
     /// max(1, ‖W̃‖²_F / (h p)), where W̃ is W in nominal units (force rows divided by m, torque
     /// rows by [`NOMINAL_TORQUE_FEATURE_NM`]), p = FEATURES is ‖W̃‖²_F of the nominal features
@@ -112,22 +124,49 @@ impl AdaptationRates {
             drive_max_m: f32::INFINITY,
             drive_max_rad: f32::INFINITY,
             soft_freeze_m: f32::INFINITY,
+            saturated_drive_m: f32::INFINITY,
+            saturated_drive_rad: f32::INFINITY,
             normalized: false,
+            ..self
+        }
+    }
+
+    /// The rates that run while the mixer saturates: the drives clipped to
+    /// [`AdaptationRates::saturated_drive_m`] and [`AdaptationRates::saturated_drive_rad`]
+    /// (each the smaller of its bound and the unsaturated one).
+    pub fn saturated(self) -> Self {
+        Self {
+            drive_max_m: self.drive_max_m.min(self.saturated_drive_m),
+            drive_max_rad: self.drive_max_rad.min(self.saturated_drive_rad),
             ..self
         }
     }
 }
 
 /// Which adaptation law runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum AdaptationLaw {
     /// The paper's gradient law on the tracking errors (eq. `geometric_adaptive_law`).
-    #[default]
     Gradient,
     /// The gradient law plus the prediction-error (Kalman-gain) term (feature `composite`).
     #[cfg(feature = "composite")]
     Composite,
+}
+
+impl Default for AdaptationLaw {
+    /// The composite law where it is compiled in (feature `composite`), else the paper's
+    /// gradient law.
+    fn default() -> Self {
+        #[cfg(feature = "composite")]
+        {
+            Self::Composite
+        }
+        #[cfg(not(feature = "composite"))]
+        {
+            Self::Gradient
+        }
+    }
 }
 
 /// Tuning of the composite law's prediction-error term (units: a's, see [`TORQUE_UNIT_NM`]).
@@ -182,7 +221,42 @@ pub struct CompositeGains {
     /// term. Both close a loop around the attitude crossover and take its phase margin
     /// ([`crate::control::Gains::for_vehicle`] splits the budget between them).
     pub torque_rate_scale: f32,
+    /// Change detection on the torque rows (a fault such as a rotor loss): when the mean square
+    /// of the torque rows' prediction error, low-passed over `fault_filter_tau_s`, exceeds
+    /// `fault_innovation`² (a's units, 1e-3 N·m), the torque block of P restarts at
+    /// `fault_p_reset` I (uncorrelated with the force columns), at most once per
+    /// `fault_holdoff_s`. From there the torque estimate is a least-squares mean of what was
+    /// measured since the change (the gain falls as 1 / samples), then the random walk's slow
+    /// gain again. The observer's small-signal bandwidth, which the attitude loop's margin
+    /// is designed for, is Q's; a step of torque is learned in tens of milliseconds instead of
+    /// the random walk's second. `f32::INFINITY` turns it off.
+    pub fault_innovation: f32,
+    /// See [`CompositeGains::fault_innovation`] (s).
+    pub fault_filter_tau_s: f32,
+    /// See [`CompositeGains::fault_innovation`].
+    pub fault_p_reset: f32,
+    /// See [`CompositeGains::fault_innovation`] (s).
+    pub fault_holdoff_s: f32,
+    /// After a detected change, the torque columns' process noise is `fault_q_torque` (per
+    /// second, as [`CompositeGains::q_torque`]) for `fault_boost_s`: the observer runs fast
+    /// while the fault's torque settles (the motors' lag, the filters), then slow again.
+    pub fault_q_torque: f32,
+    /// See [`CompositeGains::fault_q_torque`] (s).
+    pub fault_boost_s: f32,
+    /// A change counts only if the low-passed mean square is also `fault_ratio` times its own
+    /// slow average (time constant `fault_baseline_tau_s`): a model whose prediction error is
+    /// large all the time (an unmodelled motor lag, say) is not faulted, or the fast observer
+    /// would close its loop around that error. A boost whose mean square grows past
+    /// [`FAULT_ABORT_GROWTH`] times the one that started it ends at once.
+    pub fault_ratio: f32,
+    /// See [`CompositeGains::fault_ratio`] (s).
+    pub fault_baseline_tau_s: f32,
 }
+
+/// A boost of the torque observer ([`CompositeGains::fault_q_torque`]) ends when the torque
+/// rows' mean-square prediction error grows past this many times the one that started it: the
+/// fast observer is making it worse.
+pub const FAULT_ABORT_GROWTH: f32 = 4.0;
 
 impl Default for CompositeGains {
     fn default() -> Self {
@@ -201,6 +275,14 @@ impl Default for CompositeGains {
             accel_lag_s: 0.0,
             gyro_lag_s: 0.0,
             torque_rate_scale: 1.0,
+            fault_innovation: f32::INFINITY,
+            fault_filter_tau_s: 0.02,
+            fault_p_reset: 10.0,
+            fault_holdoff_s: 0.5,
+            fault_q_torque: 50.0,
+            fault_boost_s: 0.3,
+            fault_ratio: 10.0,
+            fault_baseline_tau_s: 2.0,
         }
     }
 }
@@ -277,6 +359,20 @@ struct PredictionState {
     has_filter: bool,
     /// The prediction error of the last update (a's units), for diagnostics.
     eps: Option<[f32; 6]>,
+    /// The torque rows' prediction error squared, low-passed (a's units²): the change
+    /// detector's statistic ([`CompositeGains::fault_innovation`]).
+    torque_eps2_f: f32,
+    /// Time since the torque block of P last restarted on a detected change, or since the
+    /// filter started (s).
+    since_fault_s: f32,
+    /// What is left of the fast process noise after a detected change (s).
+    boost_left_s: f32,
+
+    /// The slow average of `torque_eps2_f`'s input, and `torque_eps2_f` when the boost began.
+    torque_eps2_base: f32,
+    torque_eps2_at_fault: f32,
+    /// How many times the change detector restarted the torque block of P.
+    fault_resets: u32,
 }
 
 /// The online estimate a of the disturbance weights, and the composite law's gain P.
@@ -531,7 +627,7 @@ impl Adaptation {
             }
         }
         self.pred.has_filter = true;
-        let out = self.kalman(gains, a_max, dt_s * x.feature_scale);
+        let out = self.kalman(gains, a_max, (dt_s, dt_s * x.feature_scale));
         if out.is_none() {
             // A non-finite feature reached the filter: start it again at the next sample.
             self.pred.has_filter = false;
@@ -542,7 +638,12 @@ impl Adaptation {
     }
 
     #[cfg(feature = "composite")]
-    fn kalman(&mut self, g: &CompositeGains, a_max: f32, q_dt_s: f32) -> Option<Vector6<f32>> {
+    fn kalman(
+        &mut self,
+        g: &CompositeGains,
+        a_max: f32,
+        (dt_s, q_dt_s): (f32, f32),
+    ) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a 6×6 matrix, updated in place (no copy of its 36 entries in
         // and out); the updates below read and write its upper triangle only (the lower one is
         // mirrored on demand by `covariance`), so P stays exactly symmetric. Column-major
@@ -560,7 +661,15 @@ impl Adaptation {
         }
         // Predict: a random walk, P ← P + Q dt (Q diagonal: force columns, then torque).
         // (`q_dt_s` is dt scaled by the features' normalization.)
-        let (qf, qt) = (g.q_force * q_dt_s, g.q_torque * q_dt_s);
+        // The torque columns run on the change detector's process noise for a while after a
+        // detected change.
+        let q_torque = if self.pred.boost_left_s > 0.0 {
+            self.pred.boost_left_s -= dt_s;
+            g.fault_q_torque
+        } else {
+            g.q_torque
+        };
+        let (qf, qt) = (g.q_force * q_dt_s, q_torque * q_dt_s);
         for (i, col) in p.iter_mut().enumerate() {
             if let Some(d) = col.get_mut(i) {
                 *d += if i < 3 { qf } else { qt };
@@ -577,6 +686,34 @@ impl Adaptation {
                 .iter()
                 .zip(a0.iter())
                 .fold(*z, |acc, (hj, aj)| acc - hj * aj);
+        }
+        // Change detection on the torque rows: restart their block of P.
+        let [_, _, _, e3, e4, e5] = eps;
+        let e2 = e3 * e3 + e4 * e4 + e5 * e5;
+        let e2_f = self.pred.torque_eps2_f
+            + (e2 - self.pred.torque_eps2_f) * lag_gain(g.fault_filter_tau_s, dt_s);
+        // A non-finite error (a bad feature, dropped below) must not stop the detector for good.
+        let e2_f = if e2_f.is_finite() { e2_f } else { 0.0 };
+        self.pred.torque_eps2_f = e2_f;
+        let base = self.pred.torque_eps2_base;
+        let base = base + (e2_f - base) * lag_gain(g.fault_baseline_tau_s, dt_s);
+        self.pred.torque_eps2_base = if base.is_finite() { base } else { 0.0 };
+        let since = self.pred.since_fault_s + dt_s;
+        self.pred.since_fault_s = since;
+        if self.pred.boost_left_s > 0.0
+            && e2_f > FAULT_ABORT_GROWTH * self.pred.torque_eps2_at_fault
+        {
+            self.pred.boost_left_s = 0.0;
+        }
+        if e2_f > g.fault_innovation * g.fault_innovation
+            && e2_f > g.fault_ratio * base
+            && since >= g.fault_holdoff_s
+        {
+            self.pred.since_fault_s = 0.0;
+            self.pred.boost_left_s = g.fault_boost_s;
+            self.pred.torque_eps2_at_fault = e2_f;
+            self.pred.fault_resets = self.pred.fault_resets.saturating_add(1);
+            restart_torque_block(p, g.fault_p_reset);
         }
         // Update: R is diagonal, so the six rows are six scalar measurements in turn (exactly
         // the batch update, without a 6×6 solve): s = h P hᵀ + r, k = P hᵀ / s,
@@ -642,6 +779,12 @@ impl Adaptation {
         }
     }
 
+    /// How many times the composite law's change detector restarted the torque block of P
+    /// ([`CompositeGains::fault_innovation`]) since the last reset.
+    pub fn fault_resets(&self) -> u32 {
+        self.pred.fault_resets
+    }
+
     /// trace P (the composite law's gain; zero before its first update).
     pub fn covariance_trace(&self) -> f32 {
         self.p.trace()
@@ -672,6 +815,18 @@ fn lag_gain(tau_s: f32, dt_s: f32) -> f32 {
 fn upper(p: &[[f32; FEATURES]; FEATURES], r: usize, c: usize) -> f32 {
     let (r, c) = if r <= c { (r, c) } else { (c, r) };
     p.get(c).and_then(|col| col.get(r)).copied().unwrap_or(0.0)
+}
+
+/// The torque block of a column-major P (columns and rows 3–5) set to `p_reset` I and its
+/// cross terms with the force columns to zero, on the upper triangle (the only part the update
+/// reads). Block-diagonal with two positive definite blocks, P stays positive definite.
+#[cfg(feature = "composite")]
+fn restart_torque_block(p: &mut [[f32; FEATURES]; FEATURES], p_reset: f32) {
+    for (c, col) in p.iter_mut().enumerate().skip(3) {
+        for (r, v) in col.iter_mut().enumerate().take(c + 1) {
+            *v = if r == c { p_reset } else { 0.0 };
+        }
+    }
 }
 
 /// P = p0 I: the composite law's gain starts again.

@@ -45,8 +45,11 @@ use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 /// - The law's velocity is made consistent with the position
 ///   ([`Gains::velocity_consistency_tau_s`]), so a biased velocity estimate does not bias the
 ///   adaptation.
-/// - The adaptation law is the paper's gradient law; `law: AdaptationLaw::Composite` selects the
-///   composite law of [`crate::adapt`]. The robust clipping of [`AdaptationRates`] is off by
+/// - The adaptation law is the composite law of [`crate::adapt`] where it is compiled in (feature
+///   `composite`, a default), else the paper's gradient law; `law: AdaptationLaw::Gradient`
+///   selects the paper's. Under saturation the tracking term's drive is bounded
+///   ([`SATURATED_DRIVE_M`], [`SATURATED_DRIVE_RAD`]), never switched off; the composite law's
+///   torque observer has a change detector ([`COMPOSITE_FAULT_INNOVATION`]). The robust clipping of [`AdaptationRates`] is off by
 ///   default (it cost the gradient law on paper-spiral and changed nothing measurable with the
 ///   composite law).
 ///
@@ -172,6 +175,15 @@ pub const COMPOSITE_GYRO_LAG_S: f32 = 0.011;
 /// 3 ms and 5 ms both fly it (0.32 % and 0.20 % saturated).
 pub const COMPOSITE_TORQUE_FILTER_S: f32 = 0.005;
 
+/// The composite law's change detector under [`Gains::for_vehicle`]
+/// ([`CompositeGains::fault_innovation`], 1e-3 N·m RMS of the torque rows' prediction error,
+/// low-passed over 20 ms). Without a fault the error stays below 0.3 on every scenario of
+/// `scenarios/` but a setpoint step's first ticks (docs/adaptation.md, "Rotor loss"); the
+/// margin measurement's injection makes 0.2; a rotor losing 40 % of its thrust crosses 0.35
+/// within 30 ms. After it, [`CompositeGains::fault_q_torque`] for
+/// [`CompositeGains::fault_boost_s`].
+pub const COMPOSITE_FAULT_INNOVATION: f32 = 0.35;
+
 /// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
 /// position loop (4 rad/s), fast against a changing wind; measured flat from 0.1 to 1 s.
 pub const VELOCITY_CONSISTENCY_TAU_S: f32 = 0.3;
@@ -184,6 +196,13 @@ pub const VELOCITY_CONSISTENCY_TAU_S: f32 = 0.3;
 /// disturbance: rotor-loss-mid 1.81 → 1.99 cm. Lower c_ω alone buys more margin but less damping
 /// of the adaptation loop, and hover attitude σ grows past 0.2°.
 pub const TORQUE_ADAPTATION_SCALE: f32 = 0.8;
+
+/// [`AdaptationRates::saturated_drive_m`] of the tuned gains (m): while the mixer saturates the
+/// translational drive is that of at most this position error.
+pub const SATURATED_DRIVE_M: f32 = 0.02;
+
+/// [`AdaptationRates::saturated_drive_rad`] of the tuned gains (rad).
+pub const SATURATED_DRIVE_RAD: f32 = 0.05;
 
 /// The symmetric-optimum spacing a of the attitude design: the PD zero at ω_c / a, the lag at
 /// a ω_c; a = 3 gives a phase margin of atan 3 − atan ⅓ ≈ 53° on the design model.
@@ -319,6 +338,7 @@ impl Gains {
         g.composite.accel_lag_s = ACCEL_DELAY_S;
         g.composite.q_torque = COMPOSITE_Q_TORQUE;
         g.composite.torque_rate_scale = COMPOSITE_TORQUE_RATE_SCALE;
+        g.composite.fault_innovation = COMPOSITE_FAULT_INNOVATION;
         g
     }
 
@@ -344,10 +364,12 @@ impl Gains {
                 drive_max_m: f32::INFINITY,
                 drive_max_rad: f32::INFINITY,
                 soft_freeze_m: f32::INFINITY,
+                saturated_drive_m: SATURATED_DRIVE_M,
+                saturated_drive_rad: SATURATED_DRIVE_RAD,
                 normalized: true,
             },
             adapt: true,
-            law: AdaptationLaw::Gradient,
+            law: AdaptationLaw::default(),
             composite: CompositeGains::default(),
             shaping_omega_rad_s: 3.0,
             lag: LagCompensation::OFF,
@@ -375,6 +397,8 @@ impl Gains {
                 drive_max_m: f32::INFINITY,
                 drive_max_rad: f32::INFINITY,
                 soft_freeze_m: f32::INFINITY,
+                saturated_drive_m: f32::INFINITY,
+                saturated_drive_rad: f32::INFINITY,
                 normalized: false,
             },
             adapt: true,
@@ -451,6 +475,9 @@ pub struct Output {
     /// ([`LagCompensation`]) on the torques, the wrench `rotors` mixes. Handing over `wrench`
     /// instead drops the lead the attitude gains were designed with.
     pub command: Wrench,
+    /// The wrench the rotors deliver ([`Output::rotors`] through the forward mixer): the
+    /// command less what the mixer's saturation gave up; zero on a fault.
+    pub delivered: Wrench,
     /// The disturbance-weight estimate a after this step.
     pub a: SVector<f32, FEATURES>,
     /// The tracking errors of this step.
@@ -540,6 +567,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             rotors: RotorCommand::OFF,
             wrench: Wrench::default(),
             command: Wrench::default(),
+            delivered: Wrench::default(),
             a: self.adaptation.a,
             errors: TrackingError::default(),
             faults,
@@ -650,6 +678,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             rotors: act.rotors,
             wrench: act.wrench,
             command: act.commanded,
+            delivered: act.delivered,
             a: self.adaptation.a,
             errors: *errors,
             faults,
@@ -798,8 +827,9 @@ impl<M: HamiltonianModel> FlightController<M> {
     }
 
     /// Adaptation (paper eq. geometric_adaptive_law, with the robust clipping of
-    /// crate::adapt); the tracking term is frozen while the mixer cannot deliver the wrench,
-    /// so the estimate does not wind up on an unreachable demand. The composite law's
+    /// crate::adapt); the tracking term's drive is bounded while the mixer cannot deliver the
+    /// wrench ([`AdaptationRates::saturated`]), so the estimate neither winds up on an
+    /// unreachable demand nor stays frozen through a fault that keeps the mixer saturated. The composite law's
     /// prediction term compares with the wrench actually delivered, so it keeps running.
     #[inline(never)]
     fn adapt(
@@ -835,7 +865,13 @@ impl<M: HamiltonianModel> FlightController<M> {
             self.adaptation
                 .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
         }
-        if !(sat.roll_pitch || sat.thrust || self.shaper.freezes_adaptation()) {
+        if !self.shaper.freezes_adaptation() {
+            // Saturated: the drive bounded, not switched off (AdaptationRates::saturated).
+            let rates = if sat.roll_pitch || sat.thrust {
+                g.rates.saturated()
+            } else {
+                g.rates
+            };
             #[cfg(feature = "composite")]
             let torque_share = if g.law == AdaptationLaw::Composite {
                 g.composite.torque_rate_scale
@@ -845,7 +881,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             #[cfg(not(feature = "composite"))]
             let torque_share = 1.0;
             self.adaptation
-                .step(&g.rates, &t.features, errors, (scale, torque_share), dt_s);
+                .step(&rates, &t.features, errors, (scale, torque_share), dt_s);
         }
         #[cfg(feature = "composite")]
         self.adaptation.record_input(&act.delivered);

@@ -1,5 +1,6 @@
 //! The mixer: a body wrench [f; τ] to four rotor thrusts and speeds for the CF2X X layout,
-//! saturating so that attitude authority is kept.
+//! saturating so that attitude authority is kept: roll/pitch first, then yaw, then collective
+//! thrust within a band.
 //!
 //! Rotor numbering (the Crazyflie's): 1 front-right (+x, −y), 2 back-right (−x, −y),
 //! 3 back-left (−x, +y), 4 front-left (+x, +y); body x forward, z up. Rotor i at (xᵢ, yᵢ) with
@@ -87,6 +88,10 @@ fn min_max(v: &[f32; 4]) -> (f32, f32) {
         .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(*x), hi.max(*x)))
 }
 
+/// The share of the wanted collective thrust that the collective may give up (or gain) to make
+/// room for the yaw torque ([`Airframe::mix`], step 3): beyond it yaw gives way.
+pub const YAW_COLLECTIVE_BAND: f32 = 0.25;
+
 /// Signs (a, b, c) of rotor i's share of τx, τy, τz in the inverse mixer.
 const SIGNS: [[f32; 3]; 4] = [
     [-1.0, -1.0, -1.0],
@@ -115,10 +120,18 @@ impl Airframe {
 
     /// Rotor thrusts and speeds for a wrench, within [0, max] per rotor.
     ///
-    /// Priorities when the wrench does not fit: roll/pitch torque first, then collective thrust,
-    /// then yaw torque. Roll/pitch is scaled down only if it alone spans more than the rotor
-    /// range; the collective moves as little as possible to make room for it; yaw is scaled to
-    /// what is left. A non-finite wrench gives [`RotorCommand::OFF`].
+    /// Priorities when the wrench does not fit the rotors' range: roll/pitch torque first, then
+    /// yaw torque, then collective thrust, within a band.
+    /// 1. Roll/pitch is scaled down only if it alone spans more than the rotor range.
+    /// 2. The collective moves as little as possible to make room for roll/pitch.
+    /// 3. Yaw gets what fits with the collective free to move by up to
+    ///    [`YAW_COLLECTIVE_BAND`] of the wanted one (so a vehicle that cannot hold its heading
+    ///    still does not fall out of the sky for it); what does not fit is scaled away.
+    /// 4. The collective is the one nearest the wanted one at which that yaw fits.
+    ///
+    /// A weak rotor (a rotor loss) needs yaw before the collective: its diagonal partner must
+    /// slow down with it to hold roll and pitch, which leaves a yaw torque that only the
+    /// other pair can answer. A non-finite wrench gives [`RotorCommand::OFF`].
     pub fn mix(&self, u: &Wrench) -> (RotorCommand, Saturation) {
         let mut sat = Saturation::default();
         let d4 = 4.0 * self.arm_xy_m;
@@ -130,13 +143,11 @@ impl Airframe {
             return (RotorCommand::OFF, sat);
         }
         let tx = u.torque_nm.x / d4;
-        let ty = u.torque_nm.y / d4;
         let tz = u.torque_nm.z / k4;
+        let ty = u.torque_nm.y / d4;
         let mut rp = [0.0f32; 4];
-        let mut yaw = [0.0f32; 4];
-        for ((r, y), sg) in rp.iter_mut().zip(yaw.iter_mut()).zip(SIGNS.iter()) {
+        for (r, sg) in rp.iter_mut().zip(SIGNS.iter()) {
             *r = sg[0] * tx + sg[1] * ty;
-            *y = sg[2] * tz;
         }
         // 1. Roll/pitch alone must fit between the limits.
         let (lo, hi) = min_max(&rp);
@@ -145,37 +156,50 @@ impl Airframe {
             rp.iter_mut().for_each(|r| *r *= k);
             sat.roll_pitch = true;
         }
-        // 2. The collective moves as little as possible to make room for roll/pitch.
+        // 2. The collective nearest the wanted one that roll/pitch leaves room for.
         let (lo, hi) = min_max(&rp);
         let wanted = u.thrust_n / 4.0;
         // max/min rather than clamp: no panic path even for bounds that cross.
-        let mean = wanted.min(t_max - hi).max(-lo);
-        sat.thrust = mean != wanted;
-        // 3. Yaw gets what is left at that collective.
-        let mut yaw_scale = 1.0f32;
-        for (r, y) in rp.iter().zip(yaw.iter()) {
-            let base = mean + r;
-            if *y > 0.0 {
-                yaw_scale = yaw_scale.min((t_max - base) / y);
-            } else if *y < 0.0 {
-                yaw_scale = yaw_scale.min(base / -y);
+        let mean_rp = wanted.min(t_max - hi).max(-lo);
+        // 3. Yaw: every rotor's share moves by ±e (e = |τz| / 4k at full yaw), up on the
+        // rotors whose reaction torque has τz's sign (`up`), down on the others. With the
+        // collective m in the band [band_lo, band_hi], the largest e that fits is
+        // max over m of min(t_max − hi_up − m, m + lo_down): the two meet at m*.
+        let band = YAW_COLLECTIVE_BAND * wanted.max(0.0);
+        let band_lo = (mean_rp - band).max(-lo);
+        let band_hi = (mean_rp + band).min(t_max - hi);
+        let c = tz.abs();
+        let (mut hi_up, mut lo_down) = (f32::MIN, f32::MAX);
+        let mut dir = [0.0f32; 4];
+        for ((d, r), sg) in dir.iter_mut().zip(rp.iter()).zip(SIGNS.iter()) {
+            *d = if sg[2] * tz >= 0.0 { 1.0 } else { -1.0 };
+            if *d > 0.0 {
+                hi_up = hi_up.max(*r);
+            } else {
+                lo_down = lo_down.min(*r);
             }
         }
-        let yaw_scale = yaw_scale.clamp(0.0, 1.0); // constant bounds: the check folds away
-        sat.yaw = yaw_scale < 1.0;
-        let mut share = [0.0f32; 4];
-        for ((s, r), y) in share.iter_mut().zip(rp.iter()).zip(yaw.iter()) {
-            *s = r + yaw_scale * y;
-        }
+        let m_star = ((t_max - hi_up - lo_down) * 0.5).min(band_hi).max(band_lo);
+        let e = (t_max - hi_up - m_star)
+            .min(m_star + lo_down)
+            .min(c)
+            .max(0.0);
+        sat.yaw = e < c;
+        // 4. The collective nearest the wanted one at which that yaw fits.
+        let mean = mean_rp
+            .min((t_max - hi_up - e).min(band_hi))
+            .max((e - lo_down).max(band_lo));
+        sat.thrust = mean != wanted;
         let mut cmd = RotorCommand::OFF;
-        for ((t, r), s) in cmd
+        for (((t, rpm), r), d) in cmd
             .thrust_n
             .iter_mut()
             .zip(cmd.rpm.iter_mut())
-            .zip(share.iter())
+            .zip(rp.iter())
+            .zip(dir.iter())
         {
-            *t = (mean + s).max(0.0).min(t_max);
-            *r = crate::fpu::sqrt(*t / self.kf_n_per_rpm2);
+            *t = (mean + r + d * e).max(0.0).min(t_max);
+            *rpm = crate::fpu::sqrt(*t / self.kf_n_per_rpm2);
         }
         (cmd, sat)
     }
@@ -207,20 +231,87 @@ mod tests {
         assert!(w.torque_nm.x < 0.0 && w.torque_nm.y < 0.0 && w.torque_nm.z < 0.0);
     }
 
-    #[test]
-    fn saturation_keeps_roll_pitch_over_yaw() {
-        let af = Airframe::default();
-        let u = Wrench {
-            thrust_n: 0.26,
-            torque_nm: Vector3::new(2e-3, 0.0, 5e-3),
-        };
-        let (cmd, sat) = af.mix(&u);
-        assert!(sat.yaw);
-        let back = af.wrench(&cmd.thrust_n);
-        assert!((back.torque_nm.x - 2e-3).abs() < 1e-6);
-        assert!(cmd
-            .thrust_n
+    fn fits(af: &Airframe, cmd: &RotorCommand) -> bool {
+        cmd.thrust_n
             .iter()
-            .all(|t| *t >= 0.0 && *t <= af.max_rotor_thrust_n()));
+            .all(|t| *t >= 0.0 && *t <= af.max_rotor_thrust_n())
+    }
+
+    #[test]
+    fn saturation_keeps_roll_pitch_then_yaw_and_the_collective_gives_way_in_its_band() {
+        let af = Airframe::default();
+        let t_max = af.max_rotor_thrust_n();
+        // What a weak rotor 1 asks for: rotor 1 beyond its top, the others below. The spread
+        // fits the range, so every torque is kept exactly and the collective drops 12 %.
+        let want = af.wrench(&[1.1 * t_max, 0.7 * t_max, 0.9 * t_max, 0.7 * t_max]);
+        let (cmd, sat) = af.mix(&want);
+        assert!(fits(&af, &cmd));
+        let got = af.wrench(&cmd.thrust_n);
+        assert!(!sat.roll_pitch && !sat.yaw && sat.thrust, "{sat:?}");
+        assert!((got.torque_nm - want.torque_nm).norm() < 1e-8, "{got:?}");
+        assert!(got.thrust_n < want.thrust_n);
+        assert!(got.thrust_n >= (1.0 - YAW_COLLECTIVE_BAND) * want.thrust_n);
+    }
+
+    #[test]
+    fn yaw_gives_way_beyond_the_collective_band() {
+        let af = Airframe::default();
+        let want = Wrench {
+            thrust_n: 0.26,
+            torque_nm: Vector3::new(2e-3, 0.0, 6e-3),
+        };
+        let (cmd, sat) = af.mix(&want);
+        assert!(sat.yaw, "{sat:?}");
+        assert!(fits(&af, &cmd));
+        let got = af.wrench(&cmd.thrust_n);
+        // Roll kept exactly, yaw partly, the collective within its band.
+        assert!((got.torque_nm.x - 2e-3).abs() < 1e-6);
+        assert!(got.torque_nm.z > 0.0 && got.torque_nm.z < 6e-3);
+        let band = YAW_COLLECTIVE_BAND * want.thrust_n;
+        assert!((got.thrust_n - want.thrust_n).abs() <= band * (1.0 + 1e-4));
+    }
+
+    #[test]
+    fn priorities_hold_for_any_wrench() {
+        // A deterministic sweep: every wrench mixes into the rotor range; roll/pitch is kept in
+        // direction and exactly whenever it fits alone; yaw keeps its sign; the collective
+        // moves only within its band around the one roll/pitch leaves room for.
+        let af = Airframe::default();
+        let t_max = af.max_rotor_thrust_n();
+        let mut seed = 0x2545_f491u32;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32 * 2.0 - 1.0
+        };
+        for _ in 0..20_000 {
+            let want = Wrench {
+                thrust_n: (rnd() + 1.0) * 2.5 * t_max,
+                torque_nm: Vector3::new(rnd() * 8e-3, rnd() * 8e-3, rnd() * 8e-3),
+            };
+            let (cmd, sat) = af.mix(&want);
+            assert!(fits(&af, &cmd), "{want:?} -> {cmd:?}");
+            let got = af.wrench(&cmd.thrust_n);
+            let (w, g) = (want.torque_nm, got.torque_nm);
+            if !sat.roll_pitch {
+                // Clipping at the limits does not touch roll/pitch when it fits.
+                assert!(
+                    (g.x - w.x).abs() < 2e-6 && (g.y - w.y).abs() < 2e-6,
+                    "{want:?} {got:?}"
+                );
+            } else {
+                // Scaled, not turned: the same direction in the roll/pitch plane.
+                let cross = g.x * w.y - g.y * w.x;
+                assert!(
+                    cross.abs() < 1e-6 * (w.x.abs() + w.y.abs()).max(1e-3),
+                    "{want:?} {got:?}"
+                );
+            }
+            assert!(g.z * w.z >= -1e-9, "yaw keeps its sign: {want:?} {got:?}");
+            if !sat.yaw {
+                assert!((g.z - w.z).abs() < 2e-6, "{want:?} {got:?} {sat:?}");
+            }
+        }
     }
 }

@@ -145,8 +145,14 @@ fn default_gains_are_pinned() {
         "the perfect-state rates keep the full torque channel"
     );
     assert!(g.adapt);
-    assert_eq!(g.law, hamflight::AdaptationLaw::Gradient);
+    // The composite law is the default where it is compiled in (the default features).
+    assert_eq!(g.law, hamflight::AdaptationLaw::Composite);
     assert!(g.rates.drive_max_m.is_infinite() && g.rates.soft_freeze_m.is_infinite());
+    assert_eq!(
+        (g.rates.saturated_drive_m, g.rates.saturated_drive_rad),
+        (0.02, 0.05),
+        "saturation bounds the drive, never switches it off"
+    );
     let p = Gains::paper();
     assert_eq!(p.law, hamflight::AdaptationLaw::Gradient);
     assert_eq!(

@@ -12,8 +12,8 @@
  *   - body rates: sensors->gyro (deg/s, body) -> rad/s.
  *   - velocity: state->velocity is world frame; the core wants body frame: v = R^T v_world.
  *   - accelerometer: sensors->acc (Gs, body) -> specific force in m/s^2, always marked valid:
- *     the composite adaptation law's force rows use it (hamflight.law = 1); the paper's
- *     gradient law does not read it.
+ *     the composite adaptation law's force rows use it (hamflight.law = 1, the default); the
+ *     paper's gradient law does not read it.
  *   - setpoint, per axis x, y, z (setpoint->mode.x/y/z):
  *       modeAbs      p* = position, with velocity, acceleration and jerk as feedforward;
  *       modeVelocity the velocity is integrated into p* (the cfclient joystick, cflib velocity
@@ -58,7 +58,7 @@
  *
  * Parameters (group hamflight): kp kv kR kw maxTilt cp cv cR cw aMax (the core's gains and
  * adaptation rates, SI), adapt (0/1), reset (write 1: a = 0), airHeight (m), leash (m),
- * law (0 the paper's gradient law, 1 the composite law; a write takes effect only while not
+ * law (0 the paper's gradient law, 1 the composite law, the default; a write takes effect only while not
  * airborne, and resets a), qF qT rF rT (the composite law's Q and R: force and torque columns
  * and rows, in a's units; refused values revert).
  *
@@ -114,7 +114,7 @@
 /* The adaptation law at boot (the hamflight.law parameter's default): HF_LAW_GRADIENT or
  * HF_LAW_COMPOSITE. */
 #ifndef HAMFLIGHT_DEFAULT_LAW
-#define HAMFLIGHT_DEFAULT_LAW HF_LAW_GRADIENT
+#define HAMFLIGHT_DEFAULT_LAW HF_LAW_COMPOSITE
 #endif
 
 /* The helpers controllerOutOfTree calls before the step stay out of line: their temporaries

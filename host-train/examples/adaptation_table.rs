@@ -1,7 +1,9 @@
 //! The table of the two adaptation laws in docs/adaptation.md: every scenario that exercises
 //! the estimator, both laws side by side on both adaptive controllers.
 //!
-//! `cargo run --release -p host-train --example adaptation_table`
+//! `cargo run --release -p host-train --example adaptation_table`; with `-- --rotor-loss`, the
+//! rotor-loss set's table instead: every `rotor-loss-*` scenario, both laws, on the true state and
+//! behind the Crazyflie's sensor chain (the `cf-` twin).
 
 use host_train::control::registry;
 use host_train::fly::eval::{self, Report};
@@ -27,8 +29,57 @@ fn cm(x: Option<f64>) -> String {
     x.map_or("—".into(), |x| format!("{:.3}", 100.0 * x))
 }
 
+/// One flight's report.
+fn flight(root: &Path, scenario: &str, controller: &str) -> anyhow::Result<Report> {
+    let sc = Scenario::load(root.join(format!("scenarios/{scenario}.toml")))?;
+    let weights = root.join(registry::DEFAULT_WEIGHTS);
+    let mut ctrl = registry::by_name(controller, &sc, Some(&weights))?;
+    let log = eval::fly(&sc, ctrl.as_mut());
+    Ok(Report::from_flight(&log, &sc, None))
+}
+
+/// The rotor-loss set: RMSE over t ≥ 5 s, the peak after the fault and the recovery time, per
+/// scenario, law and state source.
+fn rotor_loss_table(root: &Path) -> anyhow::Result<()> {
+    println!("| rotor, lag | law | true state: RMSE (cm) / peak (cm) / recovery (s) | sensor chain: RMSE (cm) / peak (cm) / recovery (s) |");
+    println!("| --- | --- | --- | --- |");
+    let cell = |r: &Report| {
+        let e = r.events.first();
+        let rec = e
+            .and_then(|e| e.recovery_s)
+            .map_or("never < 1 cm".into(), |x| format!("{x:.2}"));
+        let crashed = r
+            .crash_time_s
+            .map_or(String::new(), |t| format!(" (crash at {t:.2} s)"));
+        format!(
+            "{} / {} / {rec}{crashed}",
+            cm(r.rmse_pos_window_m),
+            cm(e.map(|e| e.peak_err_m))
+        )
+    };
+    for share in [55, 50] {
+        for lag in [20, 50, 72] {
+            for law in ["gradient", "composite"] {
+                let name = format!("rotor-loss-{share}-lag{lag}");
+                let c = format!("adaptive-{law}");
+                let t = flight(root, &name, &c)?;
+                let ch = flight(root, &format!("cf-{name}"), &c)?;
+                println!(
+                    "| 1 to {share} %, {lag} ms | {law} | {} | {} |",
+                    cell(&t),
+                    cell(&ch)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 fn main() -> anyhow::Result<()> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    if std::env::args().any(|a| a == "--rotor-loss") {
+        return rotor_loss_table(&root);
+    }
     let weights = root.join(registry::DEFAULT_WEIGHTS);
     println!("| scenario | controller | RMSE t ≥ 5 s (cm) | max (cm) | events: peak (cm) / recovery (s) / RMSE 5 s after (cm) |");
     println!("| --- | --- | --- | --- | --- |");

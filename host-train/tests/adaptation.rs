@@ -28,13 +28,27 @@ fn event(r: &Report, k: usize) -> &EventMetrics {
 }
 
 #[test]
-fn the_paper_law_stays_the_default() {
-    assert_eq!(Gains::default().law, AdaptationLaw::Gradient);
+fn the_composite_law_is_the_default_and_the_paper_law_selectable() {
+    assert_eq!(Gains::default().law, AdaptationLaw::Composite);
     assert_eq!(Gains::paper().law, AdaptationLaw::Gradient);
     assert_eq!(
-        adapter::gains_with(AdaptationLaw::Composite).law,
-        AdaptationLaw::Composite
+        adapter::gains_with(AdaptationLaw::Gradient).law,
+        AdaptationLaw::Gradient
     );
+    // The plain names fly the default law, the named ones theirs.
+    let law_of = |name: &str| {
+        registry::core_by_name(name, Some(&repo(registry::DEFAULT_WEIGHTS)))
+            .expect("registered")
+            .core_law()
+    };
+    assert_eq!(law_of("adaptive"), Some(AdaptationLaw::Composite));
+    assert_eq!(law_of("geometric-adaptive"), Some(AdaptationLaw::Composite));
+    assert_eq!(law_of("adaptive-gradient"), Some(AdaptationLaw::Gradient));
+    assert_eq!(
+        law_of("geometric-adaptive-gradient"),
+        Some(AdaptationLaw::Gradient)
+    );
+    assert_eq!(law_of("learned"), None);
 }
 
 #[test]

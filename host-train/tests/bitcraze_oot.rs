@@ -564,8 +564,8 @@ fn init_prints_the_model_and_the_self_test_passes() {
         g.composite.r_torque,
     ];
     assert_eq!(f.as_slice(), expected.as_slice(), "{F32_PARAMS:?}");
-    // adapt on, no reset request, the paper's gradient law.
-    assert_eq!(b.as_slice(), [1, 0, 0, 0].as_slice(), "{U8_PARAMS:?}");
+    // adapt on, no reset request, the composite law (the default).
+    assert_eq!(b.as_slice(), [1, 0, 1, 0].as_slice(), "{U8_PARAMS:?}");
     assert_eq!(shim.param_f32("kp"), g.k_p);
 }
 
@@ -680,7 +680,11 @@ fn c_path_matches_native_with(
 
 #[test]
 fn paper_spiral_through_the_c_path_matches_the_native_controller() {
-    c_path_matches_native(0, Gains::for_vehicle(&hamflight::VehicleFacts::of(&MODEL)));
+    let gains = Gains {
+        law: hamflight::AdaptationLaw::Gradient,
+        ..Gains::for_vehicle(&hamflight::VehicleFacts::of(&MODEL))
+    };
+    c_path_matches_native(0, gains);
 }
 
 #[test]
@@ -703,21 +707,21 @@ fn the_law_parameter_waits_until_the_vehicle_is_not_airborne() {
         shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
     };
     fly_shim(&mut shim, &mut plant, 0.5, hold);
-    assert_eq!((shim.log_u8("phase"), shim.log_u8("law")), (2, 0));
+    assert_eq!((shim.log_u8("phase"), shim.log_u8("law")), (2, 1));
     // Written in the air: not applied (the parameter keeps the request).
-    shim.set_param_u8("law", 1);
+    shim.set_param_u8("law", 0);
     fly_shim(&mut shim, &mut plant, 0.2, hold);
-    assert_eq!(shim.log_u8("law"), 0, "no switch while airborne");
-    assert_eq!(shim.param_u8("law"), 1);
+    assert_eq!(shim.log_u8("law"), 1, "no switch while airborne");
+    assert_eq!(shim.param_u8("law"), 0);
     // Landed (the supervisor stops saying flying): the next ticks apply it.
     shim.supervisor(true, false);
     fly_shim(&mut shim, &mut plant, 0.01, hold);
     assert_eq!(shim.log_u8("phase"), 1);
-    assert_eq!(shim.log_u8("law"), 1, "switched on the ground");
+    assert_eq!(shim.log_u8("law"), 0, "switched on the ground");
     // An unknown law is refused and the parameter reverts.
     shim.set_param_u8("law", 7);
     fly_shim(&mut shim, &mut plant, 0.01, hold);
-    assert_eq!((shim.param_u8("law"), shim.log_u8("law")), (1, 1));
+    assert_eq!((shim.param_u8("law"), shim.log_u8("law")), (0, 0));
     // Refused Q and R revert; valid ones are taken.
     let q = shim.param_f32("qF");
     shim.set_param_f32("qF", -1.0);
@@ -744,7 +748,8 @@ fn fly_shim(
         let t = t0 + k as f64 * dt;
         let s = *plant.state();
         assert!(s.is_finite() && s.p_m.z > 0.0, "flying at t = {t} s: {s:?}");
-        shim.set_state(&s);
+        // The plant's own specific force: the composite law (the default) reads it.
+        shim.set_state_measured(&s, Some(&plant.accelerometer()));
         setpoint(shim, t);
         let cmd = plant.params.clamp_rpm(rpm_of(shim.tick()));
         plant.step(cmd, dt);
@@ -1349,7 +1354,10 @@ fn an_upload_in_flight_waits_for_the_landing() {
 #[test]
 fn a_flight_with_the_uploaded_blob_matches_the_native_controller_with_it() {
     let (m, blob) = other_blob(0.030);
-    let gains = Gains::for_vehicle(&hamflight::VehicleFacts::of(&m));
+    let gains = Gains {
+        law: hamflight::AdaptationLaw::Gradient,
+        ..Gains::for_vehicle(&hamflight::VehicleFacts::of(&m))
+    };
     let d = c_path_matches_native_with(0, gains, &m, Some(&blob));
     println!("uploaded blob, paper-spiral: largest difference from native {d:.3e} m");
 }

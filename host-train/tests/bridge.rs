@@ -102,10 +102,10 @@ fn the_accelerometer_reaches_the_composite_law() {
     // The paper's law does not read it: the same replies with and without the field.
     assert_eq!(
         estimates(
-            "geometric-adaptive",
+            "geometric-adaptive-gradient",
             &hover_lines(50, Some("[0.5, 0, 9.8]"))
         ),
-        estimates("geometric-adaptive", &hover_lines(50, None))
+        estimates("geometric-adaptive-gradient", &hover_lines(50, None))
     );
 }
 

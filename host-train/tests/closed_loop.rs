@@ -92,7 +92,7 @@ fn adaptive_holds_paper_spiral_and_beats_learned_eightyfold() {
 }
 
 /// The paper's claim: the learned model's features beat hand-chosen ones. It holds with the
-/// paper's gradient law (the default); with the composite law the nominal model (the vehicle's
+/// paper's gradient law; with the composite law (the default) the nominal model (the vehicle's
 /// true constants) predicts the measured force better and wins instead (see docs/adaptation.md).
 #[test]
 fn adaptive_beats_geometric_adaptive_with_the_paper_law() {

@@ -113,11 +113,11 @@ fn qemu_available() -> bool {
 /// before the next starts.
 static BUILD: Mutex<()> = Mutex::new(());
 
-/// Builds the QEMU firmware (release) with `features` (`qemu` and more: `composite` flies the
-/// composite adaptation law, `loop-1khz` runs the loop at 1 kHz) in its own workspace's target
-/// directory, the one `cargo fw-build` fills, and returns a copy of the ELF named after the
-/// features.
-fn build_firmware(features: &str) -> PathBuf {
+/// Builds the QEMU firmware (release) with `features` (`qemu` and more: `loop-1khz` runs the
+/// loop at 1 kHz), with the default features (the composite adaptation law) or without them
+/// (the paper's gradient law alone), in its own workspace's target directory, the one
+/// `cargo fw-build` fills, and returns a copy of the ELF named after the features.
+fn build_firmware(features: &str, default_features: bool) -> PathBuf {
     let dir = repo().join("firmware");
     let target = dir.join("target");
     let _lock: MutexGuard<()> = BUILD.lock().unwrap_or_else(|e| e.into_inner());
@@ -132,6 +132,9 @@ fn build_firmware(features: &str) -> PathBuf {
         "--target-dir",
     ]);
     cmd.arg(&target);
+    if !default_features {
+        cmd.arg("--no-default-features");
+    }
     // The outer cargo's settings must not leak into the firmware's own workspace.
     for var in [
         "CARGO_TARGET_DIR",
@@ -156,10 +159,15 @@ fn build_firmware(features: &str) -> PathBuf {
     };
     assert!(
         out.status.success(),
-        "firmware build failed (cd firmware && cargo build --release --features {features} --bin qemu):\n{stderr}{hint}"
+        "firmware build failed (cd firmware && cargo build --release --features {features} --bin qemu{}):\n{stderr}{hint}",
+        if default_features { "" } else { " --no-default-features" }
     );
     let built = target.join("thumbv7em-none-eabihf/release/qemu");
-    let copy = target.join(format!("pil-qemu-{}.elf", features.replace(',', "-")));
+    let copy = target.join(format!(
+        "pil-qemu-{}{}.elf",
+        features.replace(',', "-"),
+        if default_features { "" } else { "-gradient" }
+    ));
     std::fs::copy(&built, &copy)
         .unwrap_or_else(|e| panic!("cannot copy {} to {}: {e}", built.display(), copy.display()));
     copy
@@ -399,10 +407,10 @@ enum Rate {
 }
 
 fn pil_flight(law: AdaptationLaw, rate: Rate) {
+    // The composite law is the firmware's default feature; the paper's law alone is the image
+    // without it.
     let mut features = String::from("qemu");
-    if law == AdaptationLaw::Composite {
-        features.push_str(",composite");
-    }
+    let default_features = law == AdaptationLaw::Composite;
     if rate == Rate::Hz1000 {
         features.push_str(",loop-1khz");
     }
@@ -427,7 +435,7 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
         scenario.spec.control_hz = 1000.0;
     }
 
-    let elf = build_firmware(&features);
+    let elf = build_firmware(&features, default_features);
     let listener = TcpListener::bind("127.0.0.1:0").expect("bind a local port for the UART");
     let port = listener.local_addr().expect("local addr").port();
     let mut qemu = Qemu::start(&elf, port);

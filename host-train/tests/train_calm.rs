@@ -31,12 +31,21 @@ fn learned_without_adaptation_holds_calm_air_like_the_nominal_model() {
     let nominal = fly("ida-pbc", &sc);
     let learned = fly("learned", &sc);
     let adaptive = fly("adaptive", &sc);
-    for r in [&nominal, &learned, &adaptive] {
+    let gradient = fly("adaptive-gradient", &sc);
+    for r in [&nominal, &learned, &adaptive, &gradient] {
         assert!(!r.crashed, "{} crashed: {r:?}", r.controller);
     }
     let score = |r: &Report| r.rmse_pos_window_m.expect("window scored");
-    let (n, l, a) = (score(&nominal), score(&learned), score(&adaptive));
-    println!("calm-spiral RMSE t ≥ 5 s: ida-pbc {n:.3e} m, learned {l:.3e} m, adaptive {a:.3e} m");
+    let (n, l, a, gr) = (
+        score(&nominal),
+        score(&learned),
+        score(&adaptive),
+        score(&gradient),
+    );
+    println!(
+        "calm-spiral RMSE t ≥ 5 s: ida-pbc {n:.3e} m, learned {l:.3e} m, adaptive {a:.3e} m, \
+         adaptive-gradient {gr:.3e} m"
+    );
     // measured: ida-pbc 4.4e-6 m (the model is exact, noise-free); learned 2.4e-5 m (1.89e-3 m
     // with the calm realization alone, 1.37e-2 m before it); adaptive 2.7e-5 m.
     assert!(n < 2e-5, "ida-pbc on its own exact model: {n:.3e} m");
@@ -44,7 +53,10 @@ fn learned_without_adaptation_holds_calm_air_like_the_nominal_model() {
         l < 6e-5,
         "learned in calm air: {l:.3e} m (without the per-flight rotor gains: 1.89e-3 m)"
     );
-    assert!(a < 7e-5, "adaptive in calm air: {a:.3e} m");
+    // The composite law (the default) reads the learned model's small prediction error in calm
+    // air as a disturbance; the paper's law barely moves.
+    assert!(a < 1.4e-4, "adaptive in calm air: {a:.3e} m");
+    assert!(gr < 7e-5, "adaptive-gradient in calm air: {gr:.3e} m");
 }
 
 /// The bar: in calm air, `learned` without adaptation within 1.5× of the nominal law, on

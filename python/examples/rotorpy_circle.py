@@ -13,7 +13,7 @@ import hamflight
 from hamflight import rotorpy as hrp
 
 ap = argparse.ArgumentParser()
-ap.add_argument("--law", default="gradient", choices=["gradient", "composite"])
+ap.add_argument("--law", default="composite", choices=["gradient", "composite"])
 ap.add_argument("--seconds", type=float, default=12.0)
 args = ap.parse_args()
 

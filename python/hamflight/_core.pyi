@@ -140,8 +140,8 @@ class Controller:
     """The exact f32 flight core: model, IDA-PBC law, adaptation, mixer.
 
     ``weights``: None for the nominal CF2X model (with its hand-chosen features), or a blob
-    (path, bytes or Blob) for the learned model. ``law``: "gradient" (the paper's) or
-    "composite". Gains as keywords (see GAIN_KEYWORDS): k_p_n_per_m, k_v_n_s_per_m,
+    (path, bytes or Blob) for the learned model. ``law``: "composite" (the default) or
+    "gradient" (the paper's). Gains as keywords (see GAIN_KEYWORDS): k_p_n_per_m, k_v_n_s_per_m,
     k_r_nm_per_rad, k_w_nm_s_per_rad, max_tilt_rad, shaping_omega_rad_s, the adaptation rates
     c_p, c_v, c_r, c_w (feature units), a_max, and motor_tau_s (the lag the composite law assumes).
     """
@@ -150,7 +150,7 @@ class Controller:
         self,
         weights: Weights = None,
         *,
-        law: str = "gradient",
+        law: str = "composite",
         adapt: bool = True,
         k_p_n_per_m: float = ...,
         k_v_n_s_per_m: float = ...,
@@ -215,7 +215,7 @@ class ControllerBatch:
         weights: Weights = None,
         *,
         controllers: Optional[Sequence[Controller]] = None,
-        law: str = "gradient",
+        law: str = "composite",
         adapt: bool = True,
         **gains: float,
     ) -> None: ...

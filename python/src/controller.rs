@@ -56,7 +56,7 @@ impl HamiltonianModel for AnyModel {
 }
 
 /// The gains a model flies with unless told otherwise: the core's, from the vehicle facts the
-/// model carries (its mass and motor lag), with the paper's gradient law.
+/// model carries (its mass and motor lag), with the core's default law (the composite one).
 pub fn default_gains(model: &AnyModel) -> Gains {
     Gains::for_vehicle(&VehicleFacts::of(model))
 }
@@ -185,10 +185,13 @@ pub fn named(name: &str, weights: Option<&Bound<'_, PyAny>>) -> PyResult<(AnyMod
         (m, g)
     };
     Ok(match name {
-        "adaptive" | "adaptive-gradient" => with(learned()?, &|_| ()),
+        // The plain names fly the default law (the composite one), the named ones theirs.
+        "adaptive" => with(learned()?, &|_| ()),
+        "adaptive-gradient" => with(learned()?, &|g| g.law = AdaptationLaw::Gradient),
         "adaptive-composite" => with(learned()?, &|g| g.law = AdaptationLaw::Composite),
         "learned" => with(learned()?, &|g| g.adapt = false),
-        "geometric-adaptive" | "geometric-adaptive-gradient" => with(nominal, &|_| ()),
+        "geometric-adaptive" => with(nominal, &|_| ()),
+        "geometric-adaptive-gradient" => with(nominal, &|g| g.law = AdaptationLaw::Gradient),
         "geometric-adaptive-composite" => with(nominal, &|g| g.law = AdaptationLaw::Composite),
         "ida-pbc" => with(nominal, &|g| g.adapt = false),
         _ => {
@@ -507,7 +510,7 @@ pub struct Controller {
 #[pymethods]
 impl Controller {
     #[new]
-    #[pyo3(signature = (weights=None, *, law="gradient", adapt=true, **gains))]
+    #[pyo3(signature = (weights=None, *, law="composite", adapt=true, **gains))]
     fn new(
         weights: Option<&Bound<'_, PyAny>>,
         law: &str,
@@ -730,7 +733,7 @@ impl ControllerBatch {
     /// `n` controllers on the same model and gains (the constructor of `Controller`), or
     /// copies of the given controllers (`controllers=[...]`, their estimates included).
     #[new]
-    #[pyo3(signature = (n=None, weights=None, *, controllers=None, law="gradient", adapt=true, **gains))]
+    #[pyo3(signature = (n=None, weights=None, *, controllers=None, law="composite", adapt=true, **gains))]
     fn new(
         n: Option<usize>,
         weights: Option<&Bound<'_, PyAny>>,

@@ -115,7 +115,7 @@ def test_gains_and_law_as_keywords():
     assert g["motor_tau_s"] == pytest.approx(0.07)
     assert set(hamflight.GAIN_KEYWORDS) <= set(g)
     default = hamflight.Controller().gains
-    assert default["k_p_n_per_m"] == pytest.approx(16 * 0.027) and default["law"] == "gradient"
+    assert default["k_p_n_per_m"] == pytest.approx(16 * 0.027) and default["law"] == "composite"
     with pytest.raises(TypeError, match='unexpected keyword argument "kp"'):
         hamflight.Controller(kp=1.0)
     with pytest.raises(ValueError, match="law"):

@@ -13,16 +13,19 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-/// Every firmware feature set the READMEs mention (`.ci/run` builds them through `cargo fw-build`).
-const FIRMWARE_FEATURE_SETS: [&str; 8] = [
-    "",
-    "loop-1khz",
-    "composite",
-    "qemu",
-    "qemu,bench",
-    "qemu,loop-1khz",
-    "qemu,bench,loop-1khz",
-    "qemu,composite",
+/// Every firmware feature set the READMEs mention (`.ci/run` builds them through `cargo fw-build`):
+/// with the default features (the composite law) or without them (`false`: the paper's gradient
+/// law alone), and the features added.
+const FIRMWARE_FEATURE_SETS: [(bool, &str); 9] = [
+    (true, ""),
+    (true, "loop-1khz"),
+    (true, "qemu"),
+    (true, "qemu,bench"),
+    (true, "qemu,loop-1khz"),
+    (true, "qemu,bench,loop-1khz"),
+    (false, ""),
+    (false, "qemu"),
+    (false, "qemu,bench"),
 ];
 
 fn firmware_dir() -> PathBuf {
@@ -57,10 +60,18 @@ fn run(mut cmd: Command) -> Result<(), String> {
 
 fn fw_build() -> Result<(), String> {
     run(in_firmware("tools/ensure-target.sh"))?;
-    for features in FIRMWARE_FEATURE_SETS {
-        eprintln!("firmware: cargo build --release --bins --features '{features}'");
+    for (default_features, features) in FIRMWARE_FEATURE_SETS {
+        let no_default = if default_features {
+            ""
+        } else {
+            " --no-default-features"
+        };
+        eprintln!("firmware: cargo build --release --bins{no_default} --features '{features}'");
         let mut cmd = in_firmware("cargo");
         cmd.args(["build", "--release", "--bins", "--features", features]);
+        if !default_features {
+            cmd.arg("--no-default-features");
+        }
         run(cmd)?;
     }
     Ok(())

@@ -58,7 +58,7 @@ impl Inner {
     #[inline(never)]
     fn load_inputs(&mut self, state: &HfState, setpoint: &HfSetpoint) {
         // The accelerometer reaches the composite adaptation law when the shim marks it valid
-        // (the paper's gradient law, the default, does not read it).
+        // (the paper's gradient law does not read it).
         self.meas = Measurement {
             acc_body_m_s2: (state.specific_force_valid != 0)
                 .then(|| nalgebra::Vector3::from(state.specific_force_body_m_s2)),

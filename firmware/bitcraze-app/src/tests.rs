@@ -213,10 +213,13 @@ fn law_selection_composite_tuning_and_diagnostics() {
     let mut eps = [f32::NAN; 6];
     // SAFETY: valid pointers throughout; null ones are reported.
     unsafe {
-        assert_eq!(hf_get_law(&c), LAW_GRADIENT);
+        // The composite law is the default; the paper's gradient law is selectable.
+        assert_eq!(hf_get_law(&c), LAW_COMPOSITE);
         assert_eq!(hf_set_law(&mut c, 7), ERR_BAD_GAINS);
         assert_eq!(hf_set_law(ptr::null_mut(), LAW_COMPOSITE), ERR_NULL);
         assert_eq!(hf_get_law(ptr::null()), LAW_GRADIENT);
+        assert_eq!(hf_set_law(&mut c, LAW_GRADIENT), OK);
+        assert_eq!(hf_get_law(&c), LAW_GRADIENT);
         assert!(!hf_get_prediction_error(&c, &mut eps));
         assert_eq!((eps, hf_p_trace(&c)), ([0.0; 6], 0.0));
     }

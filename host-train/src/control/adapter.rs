@@ -25,6 +25,12 @@ pub fn gains_with(law: AdaptationLaw) -> Gains {
 pub trait CoreStep: Controller {
     /// One core step on f32 state, setpoint and sensor measurement.
     fn core_step(&mut self, state: &State, sp: &Setpoint, meas: &Measurement, dt_s: f32) -> Output;
+
+    /// The adaptation law it flies, or `None` with adaptation off.
+    fn core_law(&self) -> Option<AdaptationLaw>;
+
+    /// Mixes for `airframe` instead of the CF2X's.
+    fn set_core_airframe(&mut self, airframe: Airframe);
 }
 
 impl<M: HamiltonianModel> CoreStep for CoreController<M> {
@@ -32,6 +38,15 @@ impl<M: HamiltonianModel> CoreStep for CoreController<M> {
         let out = self.inner.step_measured(state, sp, meas, dt_s);
         self.last = Some(out);
         out
+    }
+
+    fn core_law(&self) -> Option<AdaptationLaw> {
+        let g = &self.inner.gains;
+        g.adapt.then_some(g.law)
+    }
+
+    fn set_core_airframe(&mut self, airframe: Airframe) {
+        self.inner.airframe = airframe;
     }
 }
 
@@ -57,6 +72,18 @@ pub fn airframe_of(v: &VehicleParams) -> Airframe {
         km_nm_per_rpm2: v.km_nm_per_rpm2 as f32,
         max_rpm: v.max_rpm() as f32,
     }
+}
+
+/// [`airframe_of`] the vehicle, or `None` where it is the CF2X's [`Airframe::default`] to 1e-6
+/// (so the stock vehicle's flights keep the core's own f32 constants bit for bit).
+pub fn other_airframe(v: &VehicleParams) -> Option<Airframe> {
+    let (a, d) = (airframe_of(v), Airframe::default());
+    let close = |x: f32, y: f32| (x - y).abs() <= 1e-6 * y.abs();
+    let same = close(a.arm_xy_m, d.arm_xy_m)
+        && close(a.kf_n_per_rpm2, d.kf_n_per_rpm2)
+        && close(a.km_nm_per_rpm2, d.km_nm_per_rpm2)
+        && close(a.max_rpm, d.max_rpm);
+    (!same).then_some(a)
 }
 
 /// Adapts a core [`FlightController`] to the host [`Controller`] trait.

@@ -3,7 +3,7 @@
 //!
 //! Names in `host-train eval --controller`:
 //! - `pid`, `geometric`: the baselines ([`BASELINES`]);
-//! - `adaptive`: learned model + adaptation (the paper's controller; the default law is the
+//! - `adaptive`: learned model + adaptation (the paper's controller, with the default law: the
 //!   composite one, see [`hamflight::adapt`]);
 //! - `learned`: learned model, adaptation off (the paper's "without adaptation");
 //! - `geometric-adaptive`: nominal model with hand-chosen features (a constant world force and
@@ -15,7 +15,8 @@
 //!   the default law ([`Gains::default`]).
 
 use crate::control::adapter::{
-    gains_for, gains_with, geometric_adaptive, ida_pbc, load_learned, CoreController, CoreStep,
+    gains_for, gains_with, geometric_adaptive, ida_pbc, load_learned, other_airframe,
+    CoreController, CoreStep,
 };
 use crate::control::baselines::{DslPid, Geometric};
 use crate::control::controller::Controller;
@@ -32,7 +33,7 @@ pub const DEFAULT_WEIGHTS: &str = "weights/default.hfw";
 pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     (
         "adaptive",
-        "learned Hamiltonian model + adaptation (the paper's controller; the paper's gradient law)",
+        "learned Hamiltonian model + adaptation (the paper's controller; the composite law, the default)",
     ),
     (
         "learned",
@@ -40,7 +41,7 @@ pub const CORE_CONTROLLERS: &[(&str, &str)] = &[
     ),
     (
         "geometric-adaptive",
-        "nominal model + adaptation on a constant world force and body torque (gradient law)",
+        "nominal model + adaptation on a constant world force and body torque (composite law)",
     ),
     (
         "ida-pbc",
@@ -86,12 +87,15 @@ pub fn names() -> Vec<&'static str> {
     controllers().map(|(n, _)| n).collect()
 }
 
-/// The adaptation law a controller name selects: `…-composite`, else the paper's gradient law.
+/// The adaptation law a controller name selects: `…-gradient` the paper's, `…-composite` the
+/// composite law, a plain name the default ([`Gains::default`]'s).
 fn law_in_name(name: &str) -> AdaptationLaw {
-    if name.ends_with("-composite") {
+    if name.ends_with("-gradient") {
+        AdaptationLaw::Gradient
+    } else if name.ends_with("-composite") {
         AdaptationLaw::Composite
     } else {
-        AdaptationLaw::Gradient
+        Gains::default().law
     }
 }
 
@@ -131,14 +135,19 @@ pub fn core_by_name(name: &str, weights: Option<&Path>) -> Result<Box<dyn CoreSt
     })
 }
 
-/// Any controller by name: the core's ([`CORE_CONTROLLERS`]) or a baseline (`pid`, `geometric`).
+/// Any controller by name: the core's ([`CORE_CONTROLLERS`]) or a baseline (`pid`, `geometric`),
+/// mixing for the scenario's vehicle (its arm, rotor coefficients and top speed), as the
+/// baselines, the trainer's flight check and Bitcraze's power distribution do.
 pub fn by_name(
     name: &str,
     scenario: &Scenario,
     weights: Option<&Path>,
 ) -> Result<Box<dyn Controller>> {
     if CORE_CONTROLLERS.iter().any(|(n, _)| *n == name) {
-        let c = core_by_name(name, weights)?;
+        let mut c = core_by_name(name, weights)?;
+        if let Some(af) = other_airframe(&scenario.vehicle) {
+            c.set_core_airframe(af);
+        }
         let c: Box<dyn Controller> = c;
         return Ok(c);
     }

@@ -123,7 +123,7 @@ pub const STUDY_CONTROLLERS: [(&str, &str); 12] = [
     ),
     ("ida-pbc-true", "nominal IDA-PBC, TRUE mass and inertia"),
     (
-        "geometric-adaptive",
+        "geometric-adaptive-gradient",
         "geometric-adaptive (nominal, stock constants), gradient law",
     ),
     (
@@ -135,14 +135,14 @@ pub const STUDY_CONTROLLERS: [(&str, &str); 12] = [
         "nominal, TRUE mass, inertia and motor lag, composite law (the floor)",
     ),
     ("learned", "learned, no adaptation"),
-    ("adaptive", "adaptive (learned), gradient law"),
+    ("adaptive-gradient", "adaptive (learned), gradient law"),
     ("adaptive-composite", "adaptive (learned), composite law"),
     (
         "learned-no-lag",
         "learned, no adaptation, trained on the commanded wrench (no --motor-tau-s)",
     ),
     (
-        "adaptive-no-lag",
+        "adaptive-gradient-no-lag",
         "adaptive (learned), gradient law, trained on the commanded wrench (no --motor-tau-s)",
     ),
     (
@@ -604,12 +604,15 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
             },
         );
         flights.push(fly_one(sc, TRUE_COMPOSITE, None, &mut true_composite));
-        for key in ["geometric-adaptive", "geometric-adaptive-composite"] {
+        for key in [
+            "geometric-adaptive-gradient",
+            "geometric-adaptive-composite",
+        ] {
             let mut c = registry::core_by_name(key, None)?;
             flights.push(fly_one(sc, key, None, c.as_mut()));
         }
         for (seed, lag, blob) in &blobs {
-            for key in ["learned", "adaptive", "adaptive-composite"] {
+            for key in ["learned", "adaptive-gradient", "adaptive-composite"] {
                 let mut c = registry::core_by_name(key, Some(blob))?;
                 let label = if *lag {
                     key.to_string()
