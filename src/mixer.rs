@@ -83,9 +83,33 @@ impl Default for Airframe {
     }
 }
 
+/// The smaller of two finite values: a compare and a select (`f32::min` is a library call on
+/// the Cortex-M4F, whose FPU has no min instruction; the mixer's inputs are checked finite).
+#[inline(always)]
+fn lesser(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The larger of two finite values (see [`lesser`]).
+#[inline(always)]
+fn greater(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
 fn min_max(v: &[f32; 4]) -> (f32, f32) {
-    v.iter()
-        .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(*x), hi.max(*x)))
+    let [a, b, c, d] = *v;
+    (
+        lesser(lesser(a, b), lesser(c, d)),
+        greater(greater(a, b), greater(c, d)),
+    )
 }
 
 /// The share of the wanted collective thrust that the collective may give up (or gain) to make
@@ -160,35 +184,36 @@ impl Airframe {
         let (lo, hi) = min_max(&rp);
         let wanted = u.thrust_n / 4.0;
         // max/min rather than clamp: no panic path even for bounds that cross.
-        let mean_rp = wanted.min(t_max - hi).max(-lo);
+        let mean_rp = greater(lesser(wanted, t_max - hi), -lo);
         // 3. Yaw: every rotor's share moves by ±e (e = |τz| / 4k at full yaw), up on the
         // rotors whose reaction torque has τz's sign (`up`), down on the others. With the
         // collective m in the band [band_lo, band_hi], the largest e that fits is
         // max over m of min(t_max − hi_up − m, m + lo_down): the two meet at m*.
-        let band = YAW_COLLECTIVE_BAND * wanted.max(0.0);
-        let band_lo = (mean_rp - band).max(-lo);
-        let band_hi = (mean_rp + band).min(t_max - hi);
+        let band = YAW_COLLECTIVE_BAND * greater(wanted, 0.0);
+        let band_lo = greater(mean_rp - band, -lo);
+        let band_hi = lesser(mean_rp + band, t_max - hi);
         let c = tz.abs();
         let (mut hi_up, mut lo_down) = (f32::MIN, f32::MAX);
         let mut dir = [0.0f32; 4];
         for ((d, r), sg) in dir.iter_mut().zip(rp.iter()).zip(SIGNS.iter()) {
             *d = if sg[2] * tz >= 0.0 { 1.0 } else { -1.0 };
             if *d > 0.0 {
-                hi_up = hi_up.max(*r);
+                hi_up = greater(hi_up, *r);
             } else {
-                lo_down = lo_down.min(*r);
+                lo_down = lesser(lo_down, *r);
             }
         }
-        let m_star = ((t_max - hi_up - lo_down) * 0.5).min(band_hi).max(band_lo);
-        let e = (t_max - hi_up - m_star)
-            .min(m_star + lo_down)
-            .min(c)
-            .max(0.0);
+        let m_star = greater(lesser((t_max - hi_up - lo_down) * 0.5, band_hi), band_lo);
+        let e = greater(
+            lesser(lesser(t_max - hi_up - m_star, m_star + lo_down), c),
+            0.0,
+        );
         sat.yaw = e < c;
         // 4. The collective nearest the wanted one at which that yaw fits.
-        let mean = mean_rp
-            .min((t_max - hi_up - e).min(band_hi))
-            .max((e - lo_down).max(band_lo));
+        let mean = greater(
+            lesser(mean_rp, lesser(t_max - hi_up - e, band_hi)),
+            greater(e - lo_down, band_lo),
+        );
         sat.thrust = mean != wanted;
         let mut cmd = RotorCommand::OFF;
         for (((t, rpm), r), d) in cmd
@@ -198,7 +223,7 @@ impl Airframe {
             .zip(rp.iter())
             .zip(dir.iter())
         {
-            *t = (mean + r + d * e).max(0.0).min(t_max);
+            *t = lesser(greater(mean + r + d * e, 0.0), t_max);
             *rpm = crate::fpu::sqrt(*t / self.kf_n_per_rpm2);
         }
         (cmd, sat)
