@@ -826,7 +826,9 @@ fn setpoint_is_held_between_inputs_and_forgotten_on_a_watchdog_trip() {
             crate::control_loop::DT_S,
         );
         assert_eq!(t.rpm, want.rotors.rpm, "input {seq}");
-        assert!(t.rpm.iter().all(|r| *r > 1000.0));
+        // Flying, not off. (Not every rotor: these repeated states are not a motion, and the
+        // composite law, the default, reads their constant rates as a torque to cancel.)
+        assert!(t.rpm.iter().any(|r| *r > 1000.0), "{:?}", t.rpm);
     }
     // Silence until the watchdog trips: the setpoint is forgotten, a bare state does not step.
     while l.tick(&mut m, &mut NoCost) != TickOutcome::Stopped(link::LinkStatus::WatchdogTripped) {}
