@@ -225,11 +225,10 @@ pub struct CompositeGains {
     /// of the torque rows' prediction error, low-passed over `fault_filter_tau_s`, exceeds
     /// `fault_innovation`² (a's units, 1e-3 N·m), the torque block of P restarts at
     /// `fault_p_reset` I (uncorrelated with the force columns), at most once per
-    /// `fault_holdoff_s`. From there the torque estimate is a least-squares mean of what was
-    /// measured since the change (the gain falls as 1 / samples), then the random walk's slow
-    /// gain again. The observer's small-signal bandwidth, which the attitude loop's margin
-    /// is designed for, is Q's; a step of torque is learned in tens of milliseconds instead of
-    /// the random walk's second. `f32::INFINITY` turns it off.
+    /// `fault_holdoff_s`, and the torque columns run on [`CompositeGains::fault_q_torque`] for
+    /// [`CompositeGains::fault_boost_s`]. The observer's small-signal bandwidth, which the
+    /// attitude loop's margin is designed for, stays Q's; a step of torque is learned in tens
+    /// of milliseconds instead of the random walk's second. `f32::INFINITY` turns it off.
     pub fault_innovation: f32,
     /// See [`CompositeGains::fault_innovation`] (s).
     pub fault_filter_tau_s: f32,
@@ -368,7 +367,7 @@ struct PredictionState {
     /// What is left of the fast process noise after a detected change (s).
     boost_left_s: f32,
 
-    /// The slow average of `torque_eps2_f`'s input, and `torque_eps2_f` when the boost began.
+    /// The slow average of `torque_eps2_f`, and `torque_eps2_f` when the boost began.
     torque_eps2_base: f32,
     torque_eps2_at_fault: f32,
     /// How many times the change detector restarted the torque block of P.
@@ -695,9 +694,10 @@ impl Adaptation {
         // A non-finite error (a bad feature, dropped below) must not stop the detector for good.
         let e2_f = if e2_f.is_finite() { e2_f } else { 0.0 };
         self.pred.torque_eps2_f = e2_f;
+        // Finite as `e2_f` is: it starts at zero and only ever moves toward it.
         let base = self.pred.torque_eps2_base;
         let base = base + (e2_f - base) * lag_gain(g.fault_baseline_tau_s, dt_s);
-        self.pred.torque_eps2_base = if base.is_finite() { base } else { 0.0 };
+        self.pred.torque_eps2_base = base;
         let since = self.pred.since_fault_s + dt_s;
         self.pred.since_fault_s = since;
         if self.pred.boost_left_s > 0.0

@@ -167,8 +167,8 @@ impl Airframe {
             return (RotorCommand::OFF, sat);
         }
         let tx = u.torque_nm.x / d4;
-        let tz = u.torque_nm.z / k4;
         let ty = u.torque_nm.y / d4;
+        let tz = u.torque_nm.z / k4;
         let mut rp = [0.0f32; 4];
         for (r, sg) in rp.iter_mut().zip(SIGNS.iter()) {
             *r = sg[0] * tx + sg[1] * ty;

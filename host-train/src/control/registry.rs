@@ -87,15 +87,13 @@ pub fn names() -> Vec<&'static str> {
     controllers().map(|(n, _)| n).collect()
 }
 
-/// The adaptation law a controller name selects: `…-gradient` the paper's, `…-composite` the
-/// composite law, a plain name the default ([`Gains::default`]'s).
+/// The adaptation law a name with a law suffix selects: `…-composite` the composite law, else
+/// (`…-gradient`) the paper's. The plain names fly [`Gains::default`]'s law.
 fn law_in_name(name: &str) -> AdaptationLaw {
-    if name.ends_with("-gradient") {
-        AdaptationLaw::Gradient
-    } else if name.ends_with("-composite") {
+    if name.ends_with("-composite") {
         AdaptationLaw::Composite
     } else {
-        Gains::default().law
+        AdaptationLaw::Gradient
     }
 }
 
