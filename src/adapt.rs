@@ -330,6 +330,10 @@ pub struct PredictionInput<'a> {
     pub measurement: &'a Measurement,
     /// [`Adaptation::feature_normalization`] of `features`: the process noise Q is scaled by it.
     pub feature_scale: f32,
+    /// The model's port terms, if not the identity: the prediction then takes the input's
+    /// gain, the dissipation, the gyrator and the learned potential out of the measured
+    /// momentum rate as well.
+    pub port: Option<&'a crate::model::PortTerms>,
 }
 
 /// The composite law's memory between ticks.
@@ -573,8 +577,13 @@ impl Adaptation {
         };
         self.pred.has_lag = true;
         let gu = x.gain * u;
-        let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
-        let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
+        let mut gu_v = Vector3::new(gu[0], gu[1], gu[2]);
+        let mut gu_w = Vector3::new(gu[3], gu[4], gu[5]);
+        if let Some(port) = x.port {
+            let (dv, dw) = port_correction(port, x, &u, &v, &w);
+            gu_v += dv;
+            gu_w += dw;
+        }
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
         let d_v = match x.measurement.acc_body_m_s2 {
             Some(acc) if crate::fpu::all_finite(acc.iter().copied()) => acc * m - gu_v,
@@ -796,6 +805,35 @@ impl Adaptation {
     pub fn prediction_error(&self) -> Option<Vector6<f32>> {
         self.pred.eps.map(Vector6::from)
     }
+}
+
+/// What the port terms add to the composite prediction's known momentum rate, force then
+/// torque (body frame): the input's gain, g((k − 1) ∘ u), and the port wrench at the state
+/// (docs/math.md "Dissipation, potential and actuator lag"). Out of line: a rigid-body model's
+/// step never runs it.
+#[cfg(feature = "composite")]
+#[inline(never)]
+fn port_correction(
+    port: &crate::model::PortTerms,
+    x: &PredictionInput<'_>,
+    u: &Vector4<f32>,
+    v: &Vector3<f32>,
+    w: &Vector3<f32>,
+) -> (Vector3<f32>, Vector3<f32>) {
+    let up = Vector3::new(x.rot.m31, x.rot.m32, x.rot.m33);
+    let (f, t) = port.wrench(&up, v, w);
+    let k = port.input_gain();
+    let du = x.gain
+        * Vector4::new(
+            u.x * (k.x - 1.0),
+            u.y * (k.y - 1.0),
+            u.z * (k.z - 1.0),
+            u.w * (k.w - 1.0),
+        );
+    (
+        f + Vector3::new(du[0], du[1], du[2]),
+        t + Vector3::new(du[3], du[4], du[5]),
+    )
 }
 
 /// dt / (τ + dt): the step gain of a first-order lag τ (s); 1 (no lag) for τ ≤ 0 or NaN.

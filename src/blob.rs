@@ -8,41 +8,43 @@
 //! | 4 | 2 | format version ([`FORMAT_VERSION`]) |
 //! | 6 | 18 | network shapes: J⁻¹, g, W, each `[inputs, hidden, outputs]` as u16 |
 //! | 24 | 4 | body length in bytes |
-//! | 28 | n | body: the vehicle's mass (kg), its motor time constant (s), then every network parameter ([`ModelWeights`] in blob order), each an f32, as postcard writes them |
+//! | 28 | n | body: the vehicle's mass (kg), its motor time constant (s), the port terms ([`PortTerms`], 27 numbers), then every network parameter ([`ModelWeights`] in blob order), each an f32, as postcard writes them |
 //! | 28 + n | 4 | CRC-32 (IEEE 802.3) of the body |
 //!
 //! Older versions migrate on decode, so old blobs keep flying unchanged:
 //! - version 1 (before the mass was data) has neither mass nor motor lag in its body: it is read
 //!   as a model of the stock CF2X ([`MASS_KG`], the only mass version 1 was ever trained with);
 //! - versions 1 and 2 (before the motor lag was data) read with [`DEFAULT_MOTOR_TAU_S`], the lag
-//!   the composite law's prediction assumed for every model then.
+//!   the composite law's prediction assumed for every model then;
+//! - versions 1 to 3 (before the dissipation, the learned potential and the input's gains and
+//!   lags were data) read with [`PortTerms::IDENTITY`], the rigid body alone.
 //!
 //! [`encode`] and [`encode_model`] always write the current version. [`decode`] and
 //! [`decode_into`] give the networks and the mass ([`ModelWeights`]); [`decode_model_into`] (and
-//! [`LearnedModel::from_blob`]) also the motor lag.
+//! [`LearnedModel::from_blob`]) also the motor lag and the port terms.
 //!
 //! [`decode`] (by value) and [`decode_into`] (in place, for small stacks) check each field in that
 //! order and return the first failure as a [`BlobError`]; they never panic and never leave a
 //! partly loaded model.
 
 use crate::model::{
-    LearnedModel, ModelWeights, DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG, MAX_MOTOR_TAU_S,
-    MIN_MASS_KG,
+    LearnedModel, ModelWeights, PortError, PortTerms, DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG,
+    MAX_MOTOR_TAU_S, MIN_MASS_KG, PORT_PARAMS,
 };
 
 /// The blob's first four bytes.
 pub const MAGIC: [u8; 4] = *b"HMFW";
 /// The format version this build reads and writes.
-pub const FORMAT_VERSION: u16 = 3;
+pub const FORMAT_VERSION: u16 = 4;
 /// The oldest format version this build reads (migrated on decode; see the module docs).
 pub const OLDEST_VERSION: u16 = 1;
 /// Size of the fixed header before the body.
 pub const HEADER_LEN: usize = 28;
 /// Size of the trailing checksum.
 pub const CRC_LEN: usize = 4;
-/// The largest blob this build reads: a current-version one (the mass, the motor lag and
-/// every network parameter, 4 bytes each). Older versions are shorter.
-pub const MAX_LEN: usize = HEADER_LEN + 4 * (2 + ModelWeights::PARAMS) + CRC_LEN;
+/// The largest blob this build reads: a current-version one (the mass, the motor lag, the port
+/// terms and every network parameter, 4 bytes each). Older versions are shorter.
+pub const MAX_LEN: usize = HEADER_LEN + 4 * (2 + PORT_PARAMS + ModelWeights::PARAMS) + CRC_LEN;
 
 /// Why a blob was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,6 +70,8 @@ pub enum BlobError {
     BadMass,
     /// The motor time constant is not in [0, [`MAX_MOTOR_TAU_S`]] s.
     BadMotorTau,
+    /// The port terms cannot be flown ([`PortTerms::validate`]).
+    BadPort(PortError),
 }
 
 impl core::fmt::Display for BlobError {
@@ -92,6 +96,12 @@ impl core::fmt::Display for BlobError {
             // checks the text against MIN_MASS_KG and MAX_MASS_KG).
             Self::BadMass => f.write_str("weight blob vehicle mass is outside 0.005..=5 kg"),
             Self::BadMotorTau => f.write_str("weight blob motor time constant is outside 0..=1 s"),
+            Self::BadPort(e) => f.write_str(match e {
+                PortError::NonFinite => "weight blob port terms hold a NaN or infinite number",
+                PortError::BadGain => "weight blob input gain is outside 0.02..=50",
+                PortError::BadLag => "weight blob input lag is outside 0..=1 s",
+                PortError::NegativeDissipation => "weight blob dissipation is negative",
+            }),
         }
     }
 }
@@ -178,9 +188,10 @@ pub fn decode_into(bytes: &[u8], out: &mut ModelWeights) -> Result<(), BlobError
 /// # Errors
 /// As [`decode_into`].
 pub fn decode_model_into(bytes: &[u8], out: &mut LearnedModel) -> Result<(), BlobError> {
-    let tau = decode_checked(bytes, &mut out.weights)?;
+    let (tau, port) = decode_checked(bytes, &mut out.weights)?;
     // In place: a by-value copy of the model would put 10 KB on a firmware's stack.
     out.set_motor_tau_s(tau);
+    out.set_port(port);
     Ok(())
 }
 
@@ -197,6 +208,8 @@ pub struct BlobInfo {
     pub mass_kg: f32,
     /// The motor time constant (s).
     pub motor_tau_s: f32,
+    /// The port terms ([`PortTerms::IDENTITY`] before version 4).
+    pub port: PortTerms,
 }
 
 /// Runs every check of [`decode`] without decoding: for a firmware that receives a blob into a
@@ -214,14 +227,14 @@ struct Parsed<'a> {
     params: &'a [[u8; 4]],
 }
 
-/// [`decode_into`], returning the blob's motor lag (s).
-fn decode_checked(bytes: &[u8], out: &mut ModelWeights) -> Result<f32, BlobError> {
+/// [`decode_into`], returning the blob's motor lag (s) and port terms.
+fn decode_checked(bytes: &[u8], out: &mut ModelWeights) -> Result<(f32, PortTerms), BlobError> {
     let p = parse(bytes)?;
     out.mass_kg = p.info.mass_kg;
     for (slot, b) in out.params_mut().zip(p.params) {
         *slot = f32::from_le_bytes(*b);
     }
-    Ok(p.info.motor_tau_s)
+    Ok((p.info.motor_tau_s, p.info.port))
 }
 
 /// Every check, in file order (see [`decode_into`]); writes nothing.
@@ -267,21 +280,45 @@ fn parse(bytes: &[u8]) -> Result<Parsed<'_>, BlobError> {
         return Err(BlobError::Checksum);
     }
     let (values, rest) = body.as_chunks::<4>();
-    // Version 3 puts the mass and the motor lag before the parameters, version 2 the mass
-    // alone; version 1 has neither (the stock vehicle).
-    let (mass_kg, motor_tau_s, params) = match (version, values) {
-        (1, params) => (MASS_KG, DEFAULT_MOTOR_TAU_S, params),
-        (2, [mass, params @ ..]) => (f32::from_le_bytes(*mass), DEFAULT_MOTOR_TAU_S, params),
-        (3.., [mass, tau, params @ ..]) => {
-            (f32::from_le_bytes(*mass), f32::from_le_bytes(*tau), params)
+    // Version 4 puts the mass, the motor lag and the port terms before the parameters,
+    // version 3 the mass and the lag, version 2 the mass alone; version 1 has none of them (the
+    // stock vehicle).
+    let (mass_kg, motor_tau_s, port, params) = match (version, values) {
+        (1, params) => (MASS_KG, DEFAULT_MOTOR_TAU_S, &[][..], params),
+        (2, [mass, params @ ..]) => (
+            f32::from_le_bytes(*mass),
+            DEFAULT_MOTOR_TAU_S,
+            &[][..],
+            params,
+        ),
+        (3, [mass, tau, params @ ..]) => (
+            f32::from_le_bytes(*mass),
+            f32::from_le_bytes(*tau),
+            &[][..],
+            params,
+        ),
+        (4.., [mass, tau, rest @ ..]) if rest.len() >= PORT_PARAMS => {
+            let (port, params) = rest.split_at(PORT_PARAMS);
+            (
+                f32::from_le_bytes(*mass),
+                f32::from_le_bytes(*tau),
+                port,
+                params,
+            )
         }
         _ => return Err(BlobError::Malformed),
     };
+    let mut port_values = [0.0f32; PORT_PARAMS];
+    for (o, b) in port_values.iter_mut().zip(port) {
+        *o = f32::from_le_bytes(*b);
+    }
+    let port = PortTerms::from_array(&port_values);
     if params.len() != ModelWeights::PARAMS || !rest.is_empty() {
         return Err(BlobError::Malformed);
     }
     if !mass_kg.is_finite()
         || !motor_tau_s.is_finite()
+        || !port_values.iter().all(|v| v.is_finite())
         || !params.iter().all(|b| f32::from_le_bytes(*b).is_finite())
     {
         return Err(BlobError::NonFinite);
@@ -292,6 +329,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed<'_>, BlobError> {
     if !(0.0..=MAX_MOTOR_TAU_S).contains(&motor_tau_s) {
         return Err(BlobError::BadMotorTau);
     }
+    port.validate().map_err(BlobError::BadPort)?;
     Ok(Parsed {
         info: BlobInfo {
             version,
@@ -299,6 +337,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed<'_>, BlobError> {
             crc: stored_crc,
             mass_kg,
             motor_tau_s,
+            port,
         },
         params,
     })
@@ -310,7 +349,7 @@ pub fn encode(weights: &ModelWeights) -> Vec<u8> {
     encode_model(&LearnedModel::new(*weights))
 }
 
-/// Encodes a model as a blob (host side): its networks, mass and motor lag.
+/// Encodes a model as a blob (host side): its networks, mass, motor lag and port terms.
 #[cfg(feature = "std")]
 pub fn encode_model(model: &LearnedModel) -> Vec<u8> {
     let w = &model.weights;
@@ -318,6 +357,7 @@ pub fn encode_model(model: &LearnedModel) -> Vec<u8> {
     let body = postcard::to_stdvec(&(
         w.mass_kg,
         crate::model::HamiltonianModel::motor_tau_s(model),
+        crate::model::HamiltonianModel::port(model).to_array(),
         &w.inertia,
         &w.gain,
         &w.disturbance,

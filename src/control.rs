@@ -223,7 +223,8 @@ pub struct VehicleFacts {
     pub mass_kg: f32,
     /// Principal moments of inertia diag(J) at hover (kg·m², body).
     pub inertia_kg_m2: Vector3<f32>,
-    /// The motors' first-order time constant (s).
+    /// The actuator chain's first-order time constant (s): the motors' own plus the model's
+    /// learned torque lag ([`crate::model::PortTerms::torque_lag_s`]).
     pub motor_tau_s: f32,
 }
 
@@ -248,7 +249,9 @@ impl VehicleFacts {
             Some(d) if d.iter().all(|x| x.is_finite() && *x > 0.0) => d,
             _ => stock.inertia_kg_m2,
         };
-        let tau = model.motor_tau_s();
+        // The actuator chain's lag: the motors' own and the learned one from the rotors to the
+        // torque that acts (PortTerms::torque_lag_s; zero for a rigid-body model).
+        let tau = model.motor_tau_s() + model.port().torque_lag_s;
         Self {
             mass_kg: model.mass_kg(),
             inertia_kg_m2,
@@ -514,12 +517,17 @@ pub struct FlightController<M> {
     velocity_correction_m_s: Vector3<f32>,
     /// The model's terms at this tick's state, written in place by the step.
     terms: ModelTerms,
+    /// True if the model carries port terms ([`crate::model::PortTerms`]) other than the
+    /// identity: the law then compensates them (read once, at construction).
+    port_active: bool,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
     /// A controller on `model` with `gains`, the CF2X airframe and a = 0.
     pub fn new(model: M, gains: Gains) -> Self {
+        let port_active = !model.port().is_identity();
         Self {
+            port_active,
             model,
             gains,
             airframe: Airframe::default(),
@@ -712,10 +720,18 @@ impl<M: HamiltonianModel> FlightController<M> {
         // Translational law: b_v (body frame).
         let e_p = rt * (state.p_m - sp.p_m);
         let e_v = v - rt * sp.v_m_s;
-        let b_v =
+        let mut b_v =
             rt * ((Vector3::z() * t.gravity_m_s2 + sp.a_m_s2) * m) - e_p * g.k_p - e_v * g.k_v
                 + w.cross(&e_v) * m
                 - wa_v;
+        // The port terms at the reference (docs/math.md "Dissipation, potential and actuator
+        // lag"): the law cancels the drag, the gyrator and the learned potential at the
+        // reference velocity, so what is left acts on the errors alone and is passive.
+        let b_up = Vector3::new(r.m31, r.m32, r.m33);
+        let v_ref = rt * sp.v_m_s;
+        if self.port_active {
+            b_v -= self.model.port().wrench(&b_up, &v_ref, w).0;
+        }
 
         // Desired attitude from the force the law wants. Its rate Ḟ ≈ m p⃛*, and with the
         // composite law also minus the rate of the compensation R (W a)_v, so that the attitude
@@ -753,7 +769,10 @@ impl<M: HamiltonianModel> FlightController<M> {
         let p_w = inertia * w;
         let p_dot_des_w = -(inertia * w.cross(&w_des_body));
         let pd_w = (e_r * g.k_r + e_w * g.k_w).component_mul(&g.attitude_axis_scale);
-        let b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
+        let mut b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
+        if self.port_active {
+            b_w -= self.model.port().wrench(&b_up, &v_ref, &w_des_body).1;
+        }
         Demand {
             b_act: Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z),
             errors: TrackingError { e_p, e_v, e_r, e_w },
@@ -780,6 +799,19 @@ impl<M: HamiltonianModel> FlightController<M> {
                     }
                 }
             },
+        };
+        // The input's learned effective gain k (PortTerms::input_gain): u = k⁻¹ ∘ g† b.
+        let u = if self.port_active {
+            let k = self.model.port().input_gain();
+            if !k.iter().all(|&x| x >= crate::model::port::MIN_INPUT_GAIN) {
+                return Actuation {
+                    singular: true,
+                    ..Actuation::default()
+                };
+            }
+            u.component_div(&k)
+        } else {
+            u
         };
         let wrench = Wrench {
             thrust_n: u.x,
@@ -861,6 +893,7 @@ impl<M: HamiltonianModel> FlightController<M> {
                 w_body_rad_s: &state.w_body_rad_s,
                 measurement: meas,
                 feature_scale: scale,
+                port: self.port_active.then_some(self.model.port()),
             };
             self.adaptation
                 .predict_step(&g.composite, g.rates.a_max, &x, dt_s);

@@ -70,6 +70,7 @@ impl Rig {
             w_body_rad_s: &w,
             measurement: &meas,
             feature_scale: Adaptation::feature_normalization(&self.features, 0.027),
+            port: None,
         };
         ad.predict_step(g, 20.0, &x, DT_S);
         ad.record_input(u);

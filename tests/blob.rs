@@ -10,11 +10,13 @@ mod common;
 
 use common::SplitMix64;
 use hamflight::blob::{
-    decode, decode_into, decode_model_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC,
+    check, decode, decode_into, decode_model_into, BlobError, CRC_LEN, FORMAT_VERSION, HEADER_LEN,
+    MAGIC,
 };
 use hamflight::model::{
-    DisturbanceNet, GainNet, HamiltonianModel, InertiaNet, LearnedModel, ModelWeights,
-    DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG, MAX_MOTOR_TAU_S, MIN_MASS_KG,
+    DisturbanceNet, GainNet, HamiltonianModel, InertiaNet, LearnedModel, ModelWeights, PortError,
+    PortTerms, DEFAULT_MOTOR_TAU_S, MASS_KG, MAX_MASS_KG, MAX_MOTOR_TAU_S, MIN_MASS_KG,
+    PORT_PARAMS,
 };
 use hamflight::nn::{Dense, Mlp};
 use proptest::prelude::*;
@@ -54,9 +56,23 @@ fn body_values(w: &ModelWeights) -> Vec<f32> {
     [w.mass_kg].into_iter().chain(params(w)).collect()
 }
 
-/// The body's values in blob order (format version 3): the mass, the motor time constant
-/// `tau`, then every parameter.
+/// The body's values in blob order (format version 4): the mass, the motor time constant
+/// `tau`, the port terms (the identity), then every parameter.
 fn body_values_tau(w: &ModelWeights, tau: f32) -> Vec<f32> {
+    body_values_port(w, tau, &PortTerms::IDENTITY)
+}
+
+/// The format-4 body with the port terms `port`.
+fn body_values_port(w: &ModelWeights, tau: f32, port: &PortTerms) -> Vec<f32> {
+    [w.mass_kg, tau]
+        .into_iter()
+        .chain(port.to_array())
+        .chain(params(w))
+        .collect()
+}
+
+/// The format-3 body: the mass, the motor lag, every parameter (no port terms).
+fn body_values_v3(w: &ModelWeights, tau: f32) -> Vec<f32> {
     [w.mass_kg, tau].into_iter().chain(params(w)).collect()
 }
 
@@ -102,7 +118,7 @@ fn crc32_reference(data: &[u8]) -> u32 {
 
 /// A current-version blob from a raw body, following the documented layout.
 fn blob_from_body(body: &[u8]) -> Vec<u8> {
-    blob_from_body_version(3, body)
+    blob_from_body_version(4, body)
 }
 
 /// A blob of format `version` from a raw body, following the documented layout.
@@ -152,9 +168,9 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
             let mut v = FORMAT_VERSION.to_le_bytes();
             v[pos - 4] ^= mask;
             match u16::from_le_bytes(v) {
-                // Versions 1 and 2 would read the mass or the motor lag as parameters: values
-                // too many.
-                1 | 2 => BlobError::Malformed,
+                // Versions 1 to 3 would read the mass, the motor lag or the port terms as
+                // parameters: values too many.
+                1..=3 => BlobError::Malformed,
                 v => BlobError::UnsupportedVersion(v),
             }
         }
@@ -175,13 +191,14 @@ fn expected_error(blob: &[u8], pos: usize, mask: u8) -> BlobError {
 #[test]
 fn layout_constants_match_the_documentation() {
     assert_eq!(MAGIC, *b"HMFW");
-    assert_eq!(FORMAT_VERSION, 3);
+    assert_eq!(FORMAT_VERSION, 4);
+    assert_eq!(PORT_PARAMS, 27);
     assert_eq!(HEADER_LEN, 28);
     assert_eq!(CRC_LEN, 4);
     let blob = encode_reference(&ModelWeights::default());
     assert_eq!(
         blob.len(),
-        HEADER_LEN + 4 + 4 + 4 * params(&ModelWeights::default()).len() + CRC_LEN
+        HEADER_LEN + 4 + 4 + 4 * PORT_PARAMS + 4 * params(&ModelWeights::default()).len() + CRC_LEN
     );
     assert_eq!(ModelWeights::default().mass_kg, MASS_KG);
     // The decode target stays all-zero bits, the model around it too (a `static` of it lives in
@@ -450,8 +467,8 @@ fn header_checks_come_in_file_order() {
     assert_eq!(decode(b"XXXX").err(), Some(BlobError::BadMagic));
     assert_eq!(decode(b"HMFW").err(), Some(BlobError::Truncated));
     assert_eq!(
-        decode(b"HMFW\x04\x00").err(),
-        Some(BlobError::UnsupportedVersion(4))
+        decode(b"HMFW\x05\x00").err(),
+        Some(BlobError::UnsupportedVersion(5))
     );
     assert_eq!(
         decode(b"HMFW\x00\x00").err(),
@@ -512,7 +529,7 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
         return Err(BlobError::Truncated);
     }
     let version = u16::from_le_bytes([b[4], b[5]]);
-    if !(1..=3).contains(&version) {
+    if !(1..=4).contains(&version) {
         return Err(BlobError::UnsupportedVersion(version));
     }
     if b.len() < 24 {
@@ -547,12 +564,18 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
     if crc32_reference(body) != crc {
         return Err(BlobError::Checksum);
     }
-    // Version 3: the mass, the motor lag, then the parameters; version 2: the mass, then the
-    // parameters (the default lag); version 1: the parameters (the stock mass, the default lag).
-    let n = params(&ModelWeights::default()).len() + usize::from(version) - 1;
+    // Version 4: the mass, the motor lag, the 27 port terms, then the parameters; version 3:
+    // the mass, the motor lag, then the parameters; version 2: the mass, then the parameters
+    // (the default lag); version 1: the parameters (the stock mass, the default lag).
+    let extra = match version {
+        4 => 2 + 27,
+        v => usize::from(v) - 1,
+    };
+    let n = params(&ModelWeights::default()).len() + extra;
     if body.len() != 4 * n {
         return Err(BlobError::Malformed);
     }
+    let mut port: Vec<f32> = Vec::new();
     let mut stored = body
         .chunks(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
@@ -568,9 +591,14 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
                 .chain(stored)
                 .collect()
         }
-        _ => stored.collect(),
+        3 => stored.collect(),
+        _ => {
+            let all: Vec<f32> = stored.collect();
+            port = all[2..29].to_vec();
+            all[..2].iter().chain(&all[29..]).copied().collect()
+        }
     };
-    if values.iter().any(|v| !v.is_finite()) {
+    if values.iter().chain(&port).any(|v| !v.is_finite()) {
         return Err(BlobError::NonFinite);
     }
     if !(MIN_MASS_KG..=MAX_MASS_KG).contains(&values[0]) {
@@ -578,6 +606,21 @@ fn decode_reference(b: &[u8]) -> Result<Vec<f32>, BlobError> {
     }
     if !(0.0..=MAX_MOTOR_TAU_S).contains(&values[1]) {
         return Err(BlobError::BadMotorTau);
+    }
+    if !port.is_empty() {
+        // The documented order: gain offsets (4), lags (2), drag (3), rate damping (3), …
+        if port[..4]
+            .iter()
+            .any(|k| !(0.02..=50.0).contains(&(1.0 + k)))
+        {
+            return Err(BlobError::BadPort(PortError::BadGain));
+        }
+        if port[4..6].iter().any(|t| !(0.0..=1.0).contains(t)) {
+            return Err(BlobError::BadPort(PortError::BadLag));
+        }
+        if port[6..12].iter().any(|d| *d < 0.0) {
+            return Err(BlobError::BadPort(PortError::NegativeDissipation));
+        }
     }
     Ok(values)
 }
@@ -757,9 +800,10 @@ fn decode_into_agrees_with_postcard() {
     blobs.extend(shipped.ok());
     for blob in &blobs {
         let body = &blob[HEADER_LEN..blob.len() - CRC_LEN];
-        let (mass_kg, tau, inertia, gain, disturbance): (
+        let (mass_kg, tau, _port, inertia, gain, disturbance): (
             f32,
             f32,
+            [f32; PORT_PARAMS],
             InertiaNet,
             GainNet,
             DisturbanceNet,
@@ -806,4 +850,80 @@ fn blob_error_text_names_the_range() {
     );
     let text = BlobError::BadMotorTau.to_string();
     assert!(text.contains(&format!("0..={MAX_MOTOR_TAU_S} s")), "{text}");
+}
+
+/// A version-3 blob (the mass and the motor lag, no port terms) loads as the rigid body alone.
+#[test]
+fn version_3_blob_is_migrated_to_the_rigid_body() {
+    let w = ModelWeights {
+        mass_kg: 0.045,
+        ..random_weights(41)
+    };
+    let body: Vec<u8> = body_values_v3(&w, 0.0325)
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let got = LearnedModel::from_blob(&blob_from_body_version(3, &body)).expect("version 3");
+    assert_eq!(got.weights.mass_kg, 0.045);
+    assert_eq!(got.motor_tau_s(), 0.0325);
+    assert_eq!(*got.port(), PortTerms::IDENTITY);
+    assert_eq!(params(&got.weights), params(&w));
+    // A version-4 header over a version-3 body is 27 values short.
+    assert_eq!(
+        decode(&blob_from_body_version(4, &body)).err(),
+        Some(BlobError::Malformed)
+    );
+}
+
+/// A non-trivial set of port terms that passes its checks.
+fn sample_port() -> PortTerms {
+    let mut t = PortTerms::from_array(&core::array::from_fn(|i| 1e-4 * (i as f32 + 1.0)));
+    t.thrust_gain_offset = 0.004;
+    t.torque_gain_offset = [-0.88, -0.94, -0.76];
+    t.thrust_lag_s = 0.048;
+    t.torque_lag_s = 0.054;
+    t
+}
+
+/// The port terms round-trip through the documented layout, and terms that cannot fly are
+/// refused with their reason even under a valid checksum.
+#[test]
+fn port_terms_round_trip_and_are_checked() {
+    let w = random_weights(43);
+    let port = sample_port();
+    let body: Vec<u8> = body_values_port(&w, 0.03, &port)
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let got = LearnedModel::from_blob(&blob_from_body(&body)).expect("valid port terms");
+    assert_eq!(*got.port(), port);
+    assert_eq!(check(&blob_from_body(&body)).map(|i| i.port), Ok(port));
+    #[cfg(feature = "std")]
+    assert_eq!(hamflight::blob::encode_model(&got), blob_from_body(&body));
+    let bad = |f: &dyn Fn(&mut PortTerms)| {
+        let mut p = port;
+        f(&mut p);
+        let body: Vec<u8> = body_values_port(&w, 0.03, &p)
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        decode(&blob_from_body(&body)).err()
+    };
+    assert_eq!(
+        bad(&|p| p.rate_damping_nm_s[2] = -1e-6),
+        Some(BlobError::BadPort(PortError::NegativeDissipation))
+    );
+    assert_eq!(
+        bad(&|p| p.torque_gain_offset[0] = -1.0),
+        Some(BlobError::BadPort(PortError::BadGain))
+    );
+    assert_eq!(
+        bad(&|p| p.thrust_lag_s = 1.5),
+        Some(BlobError::BadPort(PortError::BadLag))
+    );
+    // A NaN anywhere in the body is a non-finite parameter first.
+    assert_eq!(
+        bad(&|p| p.gyrator_nm_s_m[1][2] = f32::NAN),
+        Some(BlobError::NonFinite)
+    );
 }

@@ -228,8 +228,12 @@ fn queue(msg: &Downlink) {
     if let Ok(n) = link::encode(msg, &mut buf) {
         if let Ok(frame) = Frame::from_slice(buf.get(..n).unwrap_or(&[])) {
             critical_section::with(|cs| {
-                // A full queue drops the newest frame: the link is slower than the loop.
-                let _ = TXQ.borrow_ref_mut(cs).push_back(frame);
+                // A full queue drops the newest frame: the link is slower than the loop. Inside
+                // the critical section nothing else holds the queue; try_borrow_mut keeps the
+                // panic path (and its formatting code, 2 KB of flash) out of the image.
+                if let Ok(mut q) = TXQ.borrow(cs).try_borrow_mut() {
+                    let _ = q.push_back(frame);
+                }
             });
         }
     }
@@ -454,7 +458,12 @@ pub fn pump<W: Write<u8>>(tx: &mut W) -> bool {
         queue(&hello());
     }
     loop {
-        let frame = critical_section::with(|cs| TXQ.borrow_ref_mut(cs).pop_front());
+        let frame = critical_section::with(|cs| {
+            TXQ.borrow(cs)
+                .try_borrow_mut()
+                .ok()
+                .and_then(|mut q| q.pop_front())
+        });
         match frame {
             Some(f) => {
                 for &b in f.iter() {
@@ -474,7 +483,7 @@ pub fn pump<W: Write<u8>>(tx: &mut W) -> bool {
     // Sleep unless something arrived between the check above and here (WFI wakes on a pending
     // interrupt even with PRIMASK set).
     cortex_m::interrupt::disable();
-    let idle = critical_section::with(|cs| TXQ.borrow_ref(cs).is_empty())
+    let idle = critical_section::with(|cs| TXQ.borrow(cs).try_borrow().is_ok_and(|q| q.is_empty()))
         && !HELLO_REQ.load(Ordering::Acquire);
     if idle {
         cortex_m::asm::wfi();

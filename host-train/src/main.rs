@@ -33,6 +33,12 @@ enum Command {
     /// measured rotor speeds need beyond the blob's rigid body; writes FILE.json for
     /// `score --response`.
     FitResponse(host_train::pipeline::fit_response::FitResponseArgs),
+    /// Learn a blob's port terms from logged flights (the input's effective gains and lags,
+    /// the rotor drag and rate damping, the rotors' flapping gyrator, a learned potential of the
+    /// attitude) and write them into a new blob, which `score` scores alone and the controller
+    /// flies; `--hold-out TYPE` fits without a flight type and scores it (model selection on
+    /// training flights).
+    FitPort(host_train::pipeline::fit_port::FitPortArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
@@ -97,6 +103,72 @@ fn run(cli: Cli) -> Result<()> {
             println!("  blob alone     {}", at(&r.errors_blob));
             println!("  with response  {}", at(&r.errors_fitted));
             println!("wrote {} in {:.1} s", args.out.display(), r.elapsed_s);
+        }
+        Command::FitPort(args) => {
+            let r = host_train::pipeline::fit_port::run(&args)?;
+            let at = |e: &host_train::train::predict::HorizonErrors| {
+                let last = r.horizon.saturating_sub(1);
+                format!(
+                    "pos {:.4} m, vel {:.3} m/s, att {:.3} rad, rates {:.3} rad/s",
+                    e.pos_mae_m.get(last).copied().unwrap_or(f64::NAN),
+                    e.vel_mae_m_s.get(last).copied().unwrap_or(f64::NAN),
+                    e.att_mae_rad.get(last).copied().unwrap_or(f64::NAN),
+                    e.rate_mae_rad_s.get(last).copied().unwrap_or(f64::NAN)
+                )
+            };
+            let p = &r.port;
+            println!("learned ({}):", p.identifiability);
+            println!(
+                "  thrust gain {:.3}, lag {:.1} ms; torque gains {:.3} / {:.3} / {:.3}, lag {:.1} ms",
+                p.thrust_gain,
+                p.thrust_lag_s * 1e3,
+                p.torque_gain[0],
+                p.torque_gain[1],
+                p.torque_gain[2],
+                p.torque_lag_s * 1e3
+            );
+            println!(
+                "  drag {:.2} / {:.2} / {:.2} 1/s; rate damping {:.2} / {:.2} / {:.2} 1/s",
+                p.drag_per_s[0],
+                p.drag_per_s[1],
+                p.drag_per_s[2],
+                p.rate_damping_per_s[0],
+                p.rate_damping_per_s[1],
+                p.rate_damping_per_s[2]
+            );
+            println!(
+                "  flapping: roll accel {:.2} per v_y, pitch accel {:.2} per v_x (rad/s² per m/s); \
+                 tilt stiffness / J: {:?}",
+                p.gyrator_rad_s2_per_m_s[0][1], p.gyrator_rad_s2_per_m_s[1][0], p.tilt_rad_s2
+            );
+            if let Some(c) = &r.flight_check {
+                println!("flight check against the untrained prior (RMSE t ≥ 5 s):");
+                for f in &c.flights {
+                    let cm = |x: Option<f64>, crash: Option<f64>| match (x, crash) {
+                        (_, Some(t)) => format!("crash at {t:.2} s"),
+                        (Some(x), None) => format!("{:.3} cm", 100.0 * x),
+                        (None, None) => "-".to_string(),
+                    };
+                    println!(
+                        "  {:<22} {:<9} fitted {:>18}   prior {:>18}",
+                        f.scenario,
+                        f.law,
+                        cm(f.rmse_m, f.crash_s),
+                        cm(f.prior_rmse_m, f.prior_crash_s)
+                    );
+                }
+            }
+            println!("MAE at {} steps:", r.horizon);
+            println!("  start blob, fitted windows   {}", at(&r.errors_start));
+            println!("  fitted blob, fitted windows  {}", at(&r.errors_fitted));
+            if let (Some(e), Some(t)) = (&r.errors_held_out, &r.hold_out) {
+                println!("  fitted blob, held-out `{t}`  {}", at(e));
+            }
+            println!(
+                "wrote {} (and .json) in {:.1} s",
+                args.out.display(),
+                r.elapsed_s
+            );
         }
         Command::Score(args) => {
             let s = host_train::pipeline::score::run(&args)?;

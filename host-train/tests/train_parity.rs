@@ -276,6 +276,7 @@ fn fast_training_loss_matches_the_reference_ops() {
                 rotor_efficiency: None,
                 disturbance_free: false,
                 windows: 0,
+                source_file: None,
             })
             .collect(),
     };

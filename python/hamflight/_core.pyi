@@ -18,7 +18,7 @@ F32 = npt.NDArray[np.float32]
 
 class BlobError(ValueError):
     """A weight blob was rejected; ``kind`` names the failed check: Truncated, BadMagic,
-    UnsupportedVersion, ShapeMismatch, Checksum, TrailingBytes, Malformed, NonFinite, BadMass, BadMotorTau."""
+    UnsupportedVersion, ShapeMismatch, Checksum, TrailingBytes, Malformed, NonFinite, BadMass, BadMotorTau, BadPort."""
 
     kind: str
 

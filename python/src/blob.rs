@@ -32,6 +32,7 @@ fn kind(e: &CoreBlobError) -> &'static str {
         CoreBlobError::NonFinite => "NonFinite",
         CoreBlobError::BadMass => "BadMass",
         CoreBlobError::BadMotorTau => "BadMotorTau",
+        CoreBlobError::BadPort(_) => "BadPort",
     }
 }
 

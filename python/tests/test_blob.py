@@ -18,7 +18,7 @@ def test_load_and_fields():
     assert b.mass_kg == pytest.approx(0.027, rel=1e-6)
     body = data[hamflight.BLOB_HEADER_LEN : -hamflight.BLOB_CRC_LEN]
     assert b.crc == zlib.crc32(body) == int.from_bytes(data[-4:], "little")
-    assert b.version == 3 and len(b) == len(data)
+    assert b.version == 4 and len(b) == len(data)
     assert b.to_bytes() == data
     assert hamflight.Blob.from_bytes(b.to_bytes()) == b
     assert b.encode() == data  # the core's encoder writes the same bytes

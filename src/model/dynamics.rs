@@ -3,13 +3,15 @@
 //! "Hamiltonian dynamics on SE(3)"):
 //!
 //! - ṗ = R v, Ṙ = R ω̂ (ṙᵢ = rᵢ × ω);
-//! - 𝔭̇_v = 𝔭_v × ω − m g Rᵀe₃ + (g u)_v + d_v;
-//! - 𝔭̇_ω = 𝔭_ω × ω + 𝔭_v × v + Σᵢ rᵢ × ∂H/∂rᵢ + (g u)_ω + d_ω;
+//! - 𝔭̇_v = 𝔭_v × ω − m g Rᵀe₃ + (g (k ∘ u))_v + d_v − D_v v − Bᵀω;
+//! - 𝔭̇_ω = 𝔭_ω × ω + 𝔭_v × v + Σᵢ rᵢ × ∂H/∂rᵢ + (g (k ∘ u))_ω + d_ω − D_ω ω + B v + b × K b;
 //! - v̇ = 𝔭̇_v / m, ω̇ = (d/dt J⁻¹) 𝔭_ω + J⁻¹ 𝔭̇_ω;
 //!
-//! with d = W(q, 𝔭) a.
+//! with d = W(q, 𝔭) a, b = Rᵀe₃ and the port terms k, D, B, K of [`super::PortTerms`] (the
+//! identity for the rigid body alone; the input lags act before `u` reaches these equations,
+//! [`super::ActuatorLag`]).
 
-use super::{HamiltonianModel, ModelTerms, State, FEATURES};
+use super::{HamiltonianModel, ModelTerms, PortTerms, State, FEATURES};
 use nalgebra::{Matrix3, SVector, Vector3, Vector4};
 
 /// The time derivative of a [`State`] (paper eq. 1 and 2, in the state's own coordinates).
@@ -31,9 +33,11 @@ pub struct StateDerivative {
 /// ∂H/∂rᵢ of the kinetic energy at fixed momentum (zero for a constant J), `djinv_dt` the
 /// derivative of J⁻¹(q) along q̇ (zero for a constant J), `u` the control [f (N); τ (N·m)] and `a`
 /// the disturbance weights (d = W a). A non-positive mass gives a zero linear acceleration.
+#[allow(clippy::too_many_arguments)]
 pub fn hamilton_dynamics(
     state: &State,
     terms: &ModelTerms,
+    port: &PortTerms,
     p_w: &Vector3<f32>,
     dh_dr: &[Vector3<f32>; 3],
     djinv_dt: &Matrix3<f32>,
@@ -45,11 +49,13 @@ pub fn hamilton_dynamics(
     let w = state.w_body_rad_s;
     let rot = &state.rot;
     let p_v = v * m;
-    let wrench = terms.gain * u + terms.features * SVector::<f32, FEATURES>::from_row_slice(a);
-    let f_ext = Vector3::new(wrench.x, wrench.y, wrench.z);
-    let t_ext = Vector3::new(wrench.w, wrench.a, wrench.b);
+    let ku = u.component_mul(&port.input_gain());
+    let wrench = terms.gain * ku + terms.features * SVector::<f32, FEATURES>::from_row_slice(a);
     // Rᵀ e₃ is the third row r₃ of R; ∂V/∂p = m g e₃.
     let r3 = Vector3::new(rot.m31, rot.m32, rot.m33);
+    let (f_port, t_port) = port.wrench(&r3, &v, &w);
+    let f_ext = Vector3::new(wrench.x, wrench.y, wrench.z) + f_port;
+    let t_ext = Vector3::new(wrench.w, wrench.a, wrench.b) + t_port;
     let p_v_dot = p_v.cross(&w) - r3 * (m * terms.gravity_m_s2) + f_ext;
     let rows = [
         Vector3::new(rot.m11, rot.m12, rot.m13),
@@ -89,7 +95,16 @@ pub fn constant_inertia_dynamics<M: HamiltonianModel + ?Sized>(
         .unwrap_or_else(Matrix3::zeros);
     let p_w = j * state.w_body_rad_s;
     let zero = [Vector3::zeros(); 3];
-    hamilton_dynamics(state, &terms, &p_w, &zero, &Matrix3::zeros(), u, a)
+    hamilton_dynamics(
+        state,
+        &terms,
+        model.port(),
+        &p_w,
+        &zero,
+        &Matrix3::zeros(),
+        u,
+        a,
+    )
 }
 
 /// `state + dt · deriv`, component-wise (R is not re-projected onto SO(3)).
@@ -129,8 +144,8 @@ pub fn rk4_step<M: HamiltonianModel + ?Sized>(
     }
 }
 
-/// The Hamiltonian H = ½ m |v|² + ½ ωᵀ J(q) ω + m g e₃ᵀ p (J), i.e. paper Sec. 2's
-/// ½ 𝔭ᵀ M⁻¹ 𝔭 + V with 𝔭 = M ζ.
+/// The Hamiltonian H = ½ m |v|² + ½ ωᵀ J(q) ω + m g e₃ᵀ p + ½ bᵀ K b (J), i.e. paper Sec. 2's
+/// ½ 𝔭ᵀ M⁻¹ 𝔭 + V with 𝔭 = M ζ and the learned potential of [`super::PortTerms`].
 pub fn hamiltonian<M: HamiltonianModel + ?Sized>(model: &M, state: &State) -> f32 {
     let terms = model.terms(state);
     let j = terms
@@ -141,4 +156,7 @@ pub fn hamiltonian<M: HamiltonianModel + ?Sized>(model: &M, state: &State) -> f3
     0.5 * terms.mass_kg * state.v_body_m_s.norm_squared()
         + 0.5 * w.dot(&(j * w))
         + terms.mass_kg * terms.gravity_m_s2 * state.p_m.z
+        + model
+            .port()
+            .potential_j(&Vector3::new(state.rot.m31, state.rot.m32, state.rot.m33))
 }

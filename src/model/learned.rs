@@ -18,7 +18,7 @@
 //!   at every attitude, and so extrapolates to winds larger than in training.
 
 use super::{
-    DisturbanceNet, HamiltonianModel, ModelTerms, ModelWeights, State, StateDerivative,
+    DisturbanceNet, HamiltonianModel, ModelTerms, ModelWeights, PortTerms, State, StateDerivative,
     DEFAULT_MOTOR_TAU_S, FEATURES, GAIN_IN, GAIN_OUT, GRAVITY_M_S2, JINV_OUT, MASS_KG,
 };
 use crate::blob::{self, BlobError};
@@ -62,6 +62,9 @@ pub struct LearnedModel {
     /// `static` of it in `.bss`, not a 10 KB initializer in flash), and any lag round-trips
     /// exactly ([`LearnedModel::motor_tau_s`], [`LearnedModel::with_motor_tau_s`]).
     motor_tau_bits: u32,
+    /// The dissipation, the learned potential and the input's gains and lags (all zero: the
+    /// rigid body alone, [`PortTerms::IDENTITY`]).
+    port: PortTerms,
 }
 
 impl LearnedModel {
@@ -70,6 +73,7 @@ impl LearnedModel {
         Self {
             weights,
             motor_tau_bits: 0,
+            port: PortTerms::IDENTITY,
         }
     }
 
@@ -82,6 +86,18 @@ impl LearnedModel {
             motor_tau_bits: motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits(),
             ..self
         }
+    }
+
+    /// The same model with the port terms `port` (dissipation, potential, input gains and lags;
+    /// checked at decode by [`PortTerms::validate`]).
+    #[must_use]
+    pub const fn with_port(self, port: PortTerms) -> Self {
+        Self { port, ..self }
+    }
+
+    /// [`LearnedModel::with_port`] in place.
+    pub(crate) fn set_port(&mut self, port: PortTerms) {
+        self.port = port;
     }
 
     /// [`LearnedModel::with_motor_tau_s`] in place.
@@ -187,6 +203,11 @@ impl HamiltonianModel for LearnedModel {
         self.weights.mass_kg
     }
 
+    /// The blob's port terms ([`LearnedModel::with_port`]).
+    fn port(&self) -> &PortTerms {
+        &self.port
+    }
+
     /// The blob's motor lag ([`LearnedModel::with_motor_tau_s`]).
     fn motor_tau_s(&self) -> f32 {
         f32::from_bits(self.motor_tau_bits ^ DEFAULT_MOTOR_TAU_S.to_bits())
@@ -229,7 +250,7 @@ impl HamiltonianModel for LearnedModel {
             gain: self.gain(&state.rot),
             features: self.features(state),
         };
-        super::dynamics::hamilton_dynamics(state, &terms, &p_w, &dh_dr, &djinv_dt, u, a)
+        super::dynamics::hamilton_dynamics(state, &terms, &self.port, &p_w, &dh_dr, &djinv_dt, u, a)
     }
 }
 

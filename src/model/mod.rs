@@ -9,10 +9,12 @@ use serde::{Deserialize, Serialize};
 pub mod dynamics;
 pub mod learned;
 mod nominal;
+pub mod port;
 mod state;
 pub use dynamics::{hamiltonian, rk4_step, StateDerivative};
 pub use learned::LearnedModel;
 pub use nominal::{true_input_gain, NominalModel, NOMINAL_TORQUE_FEATURE_NM};
+pub use port::{ActuatorLag, PortError, PortTerms, PORT_PARAMS};
 pub use state::State;
 
 /// The stock CF2X's mass (kg): the default vehicle, and the mass of a version-1 weight blob.
@@ -85,6 +87,13 @@ pub trait HamiltonianModel {
         DEFAULT_MOTOR_TAU_S
     }
 
+    /// The dissipation, the learned potential, the gyrator and the input's gains and lags
+    /// ([`PortTerms`]): the identity (the rigid body alone) unless the model carries its own.
+    /// Constant: they do not depend on the state.
+    fn port(&self) -> &PortTerms {
+        &PortTerms::IDENTITY
+    }
+
     /// The state derivative of paper eq. 1 (Hamilton's equations on SE(3)) and eq. 2 (ζ̇) under
     /// the control `u` = [f (N); τ (N·m)] and the disturbance d = W(q, 𝔭) `a`.
     ///
@@ -112,6 +121,10 @@ impl<M: HamiltonianModel + ?Sized> HamiltonianModel for &M {
 
     fn motor_tau_s(&self) -> f32 {
         (**self).motor_tau_s()
+    }
+
+    fn port(&self) -> &PortTerms {
+        (**self).port()
     }
 
     fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {

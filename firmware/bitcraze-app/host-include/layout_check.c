@@ -8,7 +8,7 @@
 
 #include "hamflight.h"
 
-const uint32_t hf_c_layout[75] = {
+const uint32_t hf_c_layout[76] = {
     sizeof(hf_controller_t),
     _Alignof(hf_controller_t),
     sizeof(hf_state_t),
@@ -83,5 +83,6 @@ const uint32_t hf_c_layout[75] = {
     HF_ERR_BLOB_CRC,
     HF_ERR_BLOB_MOTOR_TAU,
     HF_ERR_SELF_TEST,
+    HF_ERR_BLOB_PORT,
     0xC0DE,
 };

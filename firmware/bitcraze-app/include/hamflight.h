@@ -58,7 +58,8 @@ extern "C" {
 #define HF_ERR_NULL 2u       /* NULL pointer, or the controller was never hf_init'ed */
 
 /* Why a weight blob was refused (hf_blob_check, hf_model_load): one code per check of the
- * core's blob decoder (src/blob.rs), in file order, then the self test. */
+ * core's blob decoder (src/blob.rs), in file order, then the self test; the port terms' check
+ * (format version 4) came later and has the next code. */
 #define HF_ERR_BLOB_TRUNCATED 16u   /* shorter than its header says */
 #define HF_ERR_BLOB_BAD_MAGIC 17u   /* not "HMFW" */
 #define HF_ERR_BLOB_VERSION 18u     /* a format version this build cannot read */
@@ -70,11 +71,12 @@ extern "C" {
 #define HF_ERR_BLOB_MASS 24u        /* mass outside 0.005..5 kg */
 #define HF_ERR_BLOB_MOTOR_TAU 25u   /* motor time constant outside 0..1 s */
 #define HF_ERR_SELF_TEST 26u        /* decoded, but its hover step fails the self test */
+#define HF_ERR_BLOB_PORT 27u        /* port terms that cannot fly (gain, lag, negative dissipation) */
 
 /* The largest weight blob this build reads (a current-version one), bytes. */
-#define HF_BLOB_MAX_BYTES 9712u
+#define HF_BLOB_MAX_BYTES 9820u
 /* Bytes of storage a model received at run time needs (its decoded networks). */
-#define HF_MODEL_STORAGE_BYTES 9696
+#define HF_MODEL_STORAGE_BYTES 9804
 
 /* Adaptation laws (hf_set_law). */
 #define HF_LAW_GRADIENT 0u   /* the paper's gradient law on the tracking errors */

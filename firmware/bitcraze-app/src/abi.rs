@@ -13,7 +13,7 @@ pub const FEATURES: usize = hamflight::model::FEATURES;
 pub const CONTROLLER_STORAGE_BYTES: usize = 1536;
 
 /// `HF_MODEL_STORAGE_BYTES`: an uploaded model's storage (the decoded networks, ~9.7 KB).
-pub const MODEL_STORAGE_BYTES: usize = 9696;
+pub const MODEL_STORAGE_BYTES: usize = 9804;
 /// `HF_BLOB_MAX_BYTES`: the largest weight blob (a current-version one).
 pub const BLOB_MAX_BYTES: usize = hamflight::blob::MAX_LEN;
 
@@ -68,6 +68,8 @@ pub const ERR_BLOB_MASS: u32 = 24;
 pub const ERR_BLOB_MOTOR_TAU: u32 = 25;
 /// `HF_ERR_SELF_TEST`: the blob decoded but its hover step failed the self test.
 pub const ERR_SELF_TEST: u32 = 26;
+/// `HF_ERR_BLOB_PORT`: the port terms cannot be flown ([`hamflight::model::PortError`]).
+pub const ERR_BLOB_PORT: u32 = 27;
 
 /// The `HF_ERR_BLOB_*` code of a blob error.
 pub fn blob_error_code(e: hamflight::blob::BlobError) -> u32 {
@@ -83,6 +85,7 @@ pub fn blob_error_code(e: hamflight::blob::BlobError) -> u32 {
         E::NonFinite => ERR_BLOB_NON_FINITE,
         E::BadMass => ERR_BLOB_MASS,
         E::BadMotorTau => ERR_BLOB_MOTOR_TAU,
+        E::BadPort(_) => ERR_BLOB_PORT,
     }
 }
 
@@ -407,7 +410,7 @@ mod tests {
         static hf_c_layout: [u32; LAYOUT_LEN];
     }
 
-    const LAYOUT_LEN: usize = 75;
+    const LAYOUT_LEN: usize = 76;
 
     /// The same list, in the same order, as Rust sees it.
     fn rust_layout() -> [u32; LAYOUT_LEN] {
@@ -486,6 +489,7 @@ mod tests {
             ERR_BLOB_CRC as usize,
             ERR_BLOB_MOTOR_TAU as usize,
             ERR_SELF_TEST as usize,
+            ERR_BLOB_PORT as usize,
             0xC0DE,
         ];
         v.map(|x| x as u32)

@@ -3,7 +3,9 @@
 pub mod bench;
 pub mod check;
 pub mod demo;
+pub mod fit_port;
 pub mod fit_response;
+pub mod prior_check;
 pub mod score;
 pub mod train;
 pub mod vehicle_study;

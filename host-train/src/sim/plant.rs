@@ -243,6 +243,36 @@ pub struct Effects {
     pub motor_tau_s: f64,
     /// Measurement noise on the state given to the controller.
     pub noise: StateNoise,
+    /// Extra dynamics measured on a real vehicle's flights ([`Residual`]); none by default.
+    pub residual: Option<Residual>,
+}
+
+/// What a real vehicle's flights show beyond the rigid body with its rotors (the measured-input
+/// response that `host-train fit-response` fits on logged flights; the same fields): the rotor
+/// wrench acts through first-order lags and with effective gains, and the body gets an
+/// acceleration linear in the body velocity, a constant one and an angular one linear in the
+/// tilt. A plant with it is the flight check's stand-in for the real vehicle: the rigid body
+/// of the vehicle description plus what its logs measured, which is not the blob's model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Residual {
+    /// The thrust's effective gain.
+    pub thrust_gain: f64,
+    /// Each body torque's effective gain (roll, pitch, yaw).
+    pub torque_gain: [f64; 3],
+    /// The torques' first-order lag (s).
+    pub torque_lag_s: f64,
+    /// Body acceleration per unit of ζ = (v (m/s), ω (rad/s)), row-major 6×6 (rows v̇, ω̇).
+    pub accel_per_velocity: [[f64; 6]; 6],
+    /// Constant body acceleration, v̇ (m/s²) then ω̇ (rad/s²).
+    pub accel_bias: [f64; 6],
+    /// The thrust's first-order lag (s).
+    #[serde(default)]
+    pub thrust_lag_s: f64,
+    /// Body angular acceleration (rad/s²) per unit of the world vertical's body x and y
+    /// components, row-major 3×2 (rows ω̇ₓ, ω̇ᵧ, ω̇_z).
+    #[serde(default)]
+    pub accel_per_tilt: [[f64; 2]; 3],
 }
 
 /// External disturbance: world wind force and per-rotor efficiency.
@@ -485,6 +515,8 @@ pub struct Plant {
     pub wind_variation: WindVariation,
     state: PlantState,
     rotor_rpm: [f64; 4],
+    /// The rotor wrench [f; τ] through the residual's lags ([`Effects::residual`]).
+    residual_wrench: Option<[f64; 4]>,
     t_s: f64,
     j: Matrix3<f64>,
     j_inv: Matrix3<f64>,
@@ -508,6 +540,7 @@ impl Plant {
             wind_variation: WindVariation::default(),
             state: initial,
             rotor_rpm: [h; 4],
+            residual_wrench: None,
             t_s: 0.0,
             j,
             j_inv,
@@ -593,8 +626,55 @@ impl Plant {
         a
     }
 
-    /// Forces and torques on the body at time `t_s` in state `s` with rotor speeds `rotor_rpm`.
+    /// Forces and torques on the body at time `t_s` in state `s` with rotor speeds `rotor_rpm`
+    /// (with the residual's lagged wrench and extra accelerations, [`Effects::residual`]).
     pub fn forces(&self, t_s: f64, s: &PlantState, rotor_rpm: &[f64; 4]) -> Forces {
+        let mut fr = self.rotor_forces(t_s, s, rotor_rpm);
+        let Some(r) = &self.effects.residual else {
+            return fr;
+        };
+        let raw = Self::rotor_wrench(&fr);
+        let lagged = self.residual_wrench.unwrap_or(raw);
+        let m = self.params.mass_kg;
+        // The rotor wrench replaced by its lagged, scaled self.
+        fr.force_body_n.z += r.thrust_gain * lagged[0] - raw[0];
+        for i in 0..3 {
+            fr.torque_body_nm[i] += r.torque_gain[i] * lagged[i + 1] - raw[i + 1];
+        }
+        let z = [
+            s.v_body_m_s.x,
+            s.v_body_m_s.y,
+            s.v_body_m_s.z,
+            s.w_body_rad_s.x,
+            s.w_body_rad_s.y,
+            s.w_body_rad_s.z,
+        ];
+        let up = s.rot.transpose() * Vector3::z();
+        let mut acc = [0.0; 6];
+        for ((o, row), c) in acc.iter_mut().zip(&r.accel_per_velocity).zip(&r.accel_bias) {
+            *o = row.iter().zip(&z).map(|(a, b)| a * b).sum::<f64>() + c;
+        }
+        for (o, k) in acc[3..].iter_mut().zip(&r.accel_per_tilt) {
+            *o += k[0] * up.x + k[1] * up.y;
+        }
+        fr.force_body_n += Vector3::new(acc[0], acc[1], acc[2]) * m;
+        fr.torque_body_nm += self.j * Vector3::new(acc[3], acc[4], acc[5]);
+        fr
+    }
+
+    /// The rotors' own wrench [f; τ] (N, N·m) of `fr` (before the residual).
+    fn rotor_wrench(fr: &Forces) -> [f64; 4] {
+        let f: f64 = fr.rotor_thrust_n.iter().sum();
+        [
+            f,
+            fr.torque_body_nm.x,
+            fr.torque_body_nm.y,
+            fr.torque_body_nm.z,
+        ]
+    }
+
+    /// [`Plant::forces`] without the residual.
+    fn rotor_forces(&self, t_s: f64, s: &PlantState, rotor_rpm: &[f64; 4]) -> Forces {
         let prm = &self.params;
         let dist_eff = self.disturbance.efficiency_at(t_s);
         let eff: [f64; 4] = core::array::from_fn(|i| dist_eff[i] * prm.rotor_efficiency[i]);
@@ -665,6 +745,19 @@ impl Plant {
         let cmd = self.params.clamp_rpm(cmd_rpm);
         if self.effects.motor_tau_s <= 0.0 {
             self.rotor_rpm = cmd;
+        }
+        if let Some(r) = &self.effects.residual {
+            // The residual's lags, by backward Euler (as fit-response rolls them out), held
+            // over the step.
+            let raw =
+                Self::rotor_wrench(&self.rotor_forces(self.t_s, &self.state, &self.rotor_rpm));
+            let pole = |lag: f64| if lag > 0.0 { lag / (lag + dt_s) } else { 0.0 };
+            let (af, at) = (pole(r.thrust_lag_s), pole(r.torque_lag_s));
+            let prev = self.residual_wrench.unwrap_or(raw);
+            self.residual_wrench = Some(core::array::from_fn(|i| {
+                let a = if i == 0 { af } else { at };
+                a * prev[i] + (1.0 - a) * raw[i]
+            }));
         }
         let t = self.t_s;
         let h = dt_s;

@@ -42,6 +42,8 @@
 //! rotor_drag = false
 //! ground_effect = false
 //! motor_tau_s = 0.0              # first-order motor lag time constant (s), 0 = off
+//! [effects.residual]             # optional: what a real vehicle's flights measured beyond
+//!                                # the rigid body (sim::plant::Residual; bl-real-*.toml)
 //! [effects.noise]                # measurement noise σ on the controller's state
 //! pos_m = 0.0; vel_m_s = 0.0; att_rad = 0.0; rate_rad_s = 0.0
 //! acc_m_s2 = 0.0                 # accelerometer noise σ (m/s²), its own random stream
@@ -661,6 +663,23 @@ fn validate(s: &ScenarioSpec) -> Result<()> {
             "key `effects.motor_tau_s`: expected a time constant ≥ 0 s, got {}",
             e.motor_tau_s
         );
+    }
+    if let Some(r) = &e.residual {
+        let mut numbers = [r.thrust_gain, r.torque_lag_s, r.thrust_lag_s]
+            .into_iter()
+            .chain(r.torque_gain)
+            .chain(r.accel_per_velocity.into_iter().flatten())
+            .chain(r.accel_bias)
+            .chain(r.accel_per_tilt.into_iter().flatten());
+        if !numbers.all(f64::is_finite) {
+            bail!("key `effects.residual`: every number must be finite");
+        }
+        if !(r.thrust_gain > 0.0 && r.torque_gain.iter().all(|k| *k > 0.0)) {
+            bail!("key `effects.residual`: thrust_gain and torque_gain must be positive");
+        }
+        if !(r.torque_lag_s >= 0.0 && r.thrust_lag_s >= 0.0) {
+            bail!("key `effects.residual`: the lags must be ≥ 0 s");
+        }
     }
     let n = &e.noise;
     if ![n.pos_m, n.vel_m_s, n.att_rad, n.rate_rad_s, n.acc_m_s2]

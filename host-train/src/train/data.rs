@@ -37,6 +37,8 @@ pub struct RealizationInfo {
     pub disturbance_free: bool,
     /// Number of windows.
     pub windows: usize,
+    /// For imports, the log it came from (the manifest's `source_file`).
+    pub source_file: Option<String>,
 }
 
 /// A loaded dataset.
@@ -97,6 +99,7 @@ pub fn load(dir: &Path, spec: WindowSpec) -> Result<Windows> {
             rotor_efficiency: r.meta.rotor_efficiency.map(|d| d.map(|x| x as f32)),
             disturbance_free: r.meta.disturbance_free,
             windows: n,
+            source_file: r.meta.source_file.clone(),
         });
     }
     Ok(Windows {

@@ -36,6 +36,7 @@ pub mod export;
 pub mod fused;
 #[path = "loop.rs"]
 pub mod r#loop;
+pub mod port_fit;
 pub mod predict;
 pub mod response;
 pub mod tensor_model;

@@ -26,7 +26,9 @@
 //! [`fit`] identifies the response on a dataset by Levenberg–Marquardt on multi-step rollouts.
 
 use hamflight::lie;
-use hamflight::model::{rk4_step, HamiltonianModel, ModelTerms, State, StateDerivative, FEATURES};
+use hamflight::model::{
+    rk4_step, ActuatorLag, HamiltonianModel, ModelTerms, State, StateDerivative, FEATURES,
+};
 use nalgebra::{DMatrix, DVector, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
@@ -187,6 +189,10 @@ impl<M: HamiltonianModel> HamiltonianModel for WithVelocityTerm<'_, M> {
         self.base.motor_tau_s()
     }
 
+    fn port(&self) -> &hamflight::model::PortTerms {
+        self.base.port()
+    }
+
     fn dynamics(&self, state: &State, u: &Vector4<f32>, a: &[f32; FEATURES]) -> StateDerivative {
         let mut d = self.base.dynamics(state, u, a);
         let z = [
@@ -224,6 +230,10 @@ pub fn rollout<M: HamiltonianModel>(
     mut visit: impl FnMut(usize, &State),
 ) {
     let model = WithVelocityTerm { base, response };
+    // The model's own input lags (its PortTerms; none for a rigid-body blob), then the
+    // response's.
+    let port = *base.port();
+    let mut model_lag = ActuatorLag::new();
     // The lag discretized by backward Euler, τ̄ₖ = (T τ̄ₖ₋₁ + dt τₖ) / (T + dt): unlike
     // exp(−dt/T), its pole moves at T = 0, so a fit that reaches T = 0 can leave it again.
     let pole = |lag: f32| {
@@ -239,6 +249,8 @@ pub fn rollout<M: HamiltonianModel>(
     let mut thrust = u.first().map_or(0.0, |u0| u0[0]);
     let mut s = *s0;
     for (k, uk) in u.iter().enumerate() {
+        let lagged = model_lag.step(&port, &Vector4::from(*uk), dt_s);
+        let uk = &[lagged.x, lagged.y, lagged.z, lagged.w];
         for (t, &x) in tau.iter_mut().zip(&uk[1..]) {
             *t = alpha * *t + (1.0 - alpha) * x;
         }
@@ -354,17 +366,59 @@ fn residual_steps(n: usize) -> Vec<usize> {
     s
 }
 
+/// A rollout of a parameter vector: from the first state under the logged wrenches (one per
+/// step of the given dt), calling `visit(k, state)` after step k.
+pub(crate) trait Roll: Sync {
+    /// Rolls the model of `p` out ([`rollout`]'s contract).
+    fn roll(
+        &self,
+        p: &[f64],
+        s0: &State,
+        u: &[[f32; 4]],
+        dt_s: f32,
+        visit: &mut dyn FnMut(usize, &State),
+    );
+}
+
+/// The response's own rollout ([`rollout`] of `base` with [`Response::from_params`]).
+struct ResponseRoll<'a, M> {
+    base: &'a M,
+}
+
+impl<M: HamiltonianModel + Sync> Roll for ResponseRoll<'_, M> {
+    fn roll(
+        &self,
+        p: &[f64],
+        s0: &State,
+        u: &[[f32; 4]],
+        dt_s: f32,
+        visit: &mut dyn FnMut(usize, &State),
+    ) {
+        let mut q = [0.0; PARAMS];
+        for (o, v) in q.iter_mut().zip(p) {
+            *o = *v;
+        }
+        rollout(
+            self.base,
+            &Response::from_params(&q),
+            s0,
+            u,
+            dt_s,
+            |k, s| visit(k, s),
+        );
+    }
+}
+
 /// The scaled residuals of `p` over windows `ids`: for every window and every step of
 /// [`residual_steps`], 12 numbers (position, world velocity, attitude log, rates). A diverged
 /// rollout gives non-finite residuals.
-fn residuals<M: HamiltonianModel>(
-    base: &M,
-    p: &[f64; PARAMS],
+fn residuals(
+    roll: &dyn Roll,
+    p: &[f64],
     data: &Windows,
     ids: &[usize],
     scales: &[f64; 4],
 ) -> Vec<f64> {
-    let response = Response::from_params(p);
     let dt = 1.0 / data.sample_hz;
     let n = data.window_len.saturating_sub(1);
     let steps = residual_steps(n);
@@ -373,7 +427,7 @@ fn residuals<M: HamiltonianModel>(
         let Some(s0) = w.states.first() else { continue };
         let u = w.u.get(..n).unwrap_or(&w.u);
         let mut at = vec![None; n];
-        rollout(base, &response, s0, u, dt, |k, s| {
+        roll.roll(p, s0, u, dt, &mut |k, s| {
             if let Some(slot) = at.get_mut(k) {
                 *slot = Some(*s);
             }
@@ -441,10 +495,73 @@ pub fn fit<M: HamiltonianModel + Sync>(
     ids: &[usize],
     start: &Response,
     cfg: &FitConfig,
-    mut progress: impl FnMut(&FitStep),
+    progress: impl FnMut(&FitStep),
 ) -> (Response, Vec<FitStep>) {
-    let mut p = start.to_params();
-    let mut r = residuals(base, &p, data, ids, &cfg.scales);
+    let fixed: Vec<bool> = (0..PARAMS)
+        .map(|i| is_fixed(i, cfg.force, cfg.tilt))
+        .collect();
+    let project = |q: &mut [f64]| {
+        for i in [TORQUE_LAG, THRUST_LAG] {
+            if let Some(x) = q.get_mut(i) {
+                *x = x.max(0.0);
+            }
+        }
+    };
+    let problem = Problem {
+        roll: &ResponseRoll { base },
+        data,
+        ids,
+        scales: cfg.scales,
+        threads: cfg.threads,
+    };
+    let (p, steps) = lm_fit(
+        &problem,
+        start.to_params().to_vec(),
+        &fixed,
+        &project,
+        cfg.iterations,
+        progress,
+    );
+    let mut q = [0.0; PARAMS];
+    for (o, v) in q.iter_mut().zip(&p) {
+        *o = *v;
+    }
+    (Response::from_params(&q), steps)
+}
+
+/// What [`lm_fit`] fits: a rollout of a parameter vector and the windows it is scored on.
+pub(crate) struct Problem<'a> {
+    /// The parametrized rollout.
+    pub roll: &'a dyn Roll,
+    /// The dataset.
+    pub data: &'a Windows,
+    /// The windows fitted on.
+    pub ids: &'a [usize],
+    /// [`FitConfig::scales`].
+    pub scales: [f64; 4],
+    /// Threads for the Jacobian.
+    pub threads: usize,
+}
+
+impl Problem<'_> {
+    fn residuals(&self, p: &[f64]) -> Vec<f64> {
+        residuals(self.roll, p, self.data, self.ids, &self.scales)
+    }
+}
+
+/// Levenberg–Marquardt with IRLS on [`cost`] from `p`, the parameters where `fixed` is true
+/// held, `project` applied to every trial point (bounds). Returns the best point found and the
+/// iterations.
+pub(crate) fn lm_fit(
+    problem: &Problem<'_>,
+    mut p: Vec<f64>,
+    fixed: &[bool],
+    project: &dyn Fn(&mut [f64]),
+    iterations: usize,
+    mut progress: impl FnMut(&FitStep),
+) -> (Vec<f64>, Vec<FitStep>) {
+    let n_params = p.len();
+    let mut r = problem.residuals(&p);
     let mut c = cost(&r);
     let mut lambda = 1e-2;
     let mut steps = vec![FitStep {
@@ -454,10 +571,10 @@ pub fn fit<M: HamiltonianModel + Sync>(
     }];
     progress(&steps[0]);
     if !c.is_finite() || r.is_empty() {
-        return (Response::from_params(&p), steps);
+        return (p, steps);
     }
-    for iteration in 1..=cfg.iterations {
-        let mut jac = jacobian(base, &p, &r, data, ids, cfg);
+    for iteration in 1..=iterations {
+        let mut jac = jacobian(problem, &p, &r, fixed);
         let w = irls_weights(&r);
         for (mut row, wi) in jac.row_iter_mut().zip(&w) {
             row *= *wi;
@@ -469,20 +586,19 @@ pub fn fit<M: HamiltonianModel + Sync>(
         let mut converged = false;
         for _ in 0..8 {
             let mut a = jt_j.clone();
-            for i in 0..PARAMS {
+            for i in 0..n_params {
                 a[(i, i)] += lambda * (jt_j[(i, i)] + 1e-9);
             }
             let Some(delta) = a.cholesky().map(|ch| ch.solve(&(-&jt_r))) else {
                 lambda *= 10.0;
                 continue;
             };
-            let mut q = p;
+            let mut q = p.clone();
             for (qi, d) in q.iter_mut().zip(delta.iter()) {
                 *qi += d;
             }
-            q[TORQUE_LAG] = q[TORQUE_LAG].max(0.0);
-            q[THRUST_LAG] = q[THRUST_LAG].max(0.0);
-            let rq = residuals(base, &q, data, ids, &cfg.scales);
+            project(&mut q);
+            let rq = problem.residuals(&q);
             let cq = cost(&rq);
             if cq < c {
                 let gain = (c - cq) / c;
@@ -505,27 +621,22 @@ pub fn fit<M: HamiltonianModel + Sync>(
             break;
         }
     }
-    (Response::from_params(&p), steps)
+    (p, steps)
 }
 
-/// The forward-difference Jacobian of [`residuals`] at `p` (with `r` its value there), its
-/// columns split over `cfg.threads` threads.
-fn jacobian<M: HamiltonianModel + Sync>(
-    base: &M,
-    p: &[f64; PARAMS],
-    r: &[f64],
-    data: &Windows,
-    ids: &[usize],
-    cfg: &FitConfig,
-) -> DMatrix<f64> {
+/// The forward-difference Jacobian of the residuals at `p` (with `r` their value there), its
+/// columns split over the problem's threads; columns of `fixed` parameters are zero.
+fn jacobian(problem: &Problem<'_>, p: &[f64], r: &[f64], fixed: &[bool]) -> DMatrix<f64> {
+    let n_params = p.len();
     let column = |i: usize| -> Vec<f64> {
-        if is_fixed(i, cfg.force, cfg.tilt) {
+        if fixed.get(i).copied().unwrap_or(false) {
             return vec![0.0; r.len()];
         }
         let h = 1e-3 * p[i].abs().max(1.0);
-        let mut q = *p;
+        let mut q = p.to_vec();
         q[i] += h;
-        residuals(base, &q, data, ids, &cfg.scales)
+        problem
+            .residuals(&q)
             .iter()
             .zip(r)
             .map(|(a, b)| {
@@ -538,13 +649,13 @@ fn jacobian<M: HamiltonianModel + Sync>(
             })
             .collect()
     };
-    let threads = cfg.threads.clamp(1, PARAMS);
+    let threads = problem.threads.clamp(1, n_params.max(1));
     let cols: Vec<(usize, Vec<f64>)> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
                 let column = &column;
                 s.spawn(move || {
-                    (t..PARAMS)
+                    (t..n_params)
                         .step_by(threads)
                         .map(|i| (i, column(i)))
                         .collect::<Vec<_>>()
@@ -556,7 +667,7 @@ fn jacobian<M: HamiltonianModel + Sync>(
             .flat_map(|h| h.join().unwrap_or_default())
             .collect()
     });
-    let mut jac = DMatrix::zeros(r.len(), PARAMS);
+    let mut jac = DMatrix::zeros(r.len(), n_params);
     for (i, col) in cols {
         for (row, v) in col.into_iter().enumerate() {
             jac[(row, i)] = v;
