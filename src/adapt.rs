@@ -577,13 +577,8 @@ impl Adaptation {
         };
         self.pred.has_lag = true;
         let gu = x.gain * u;
-        let mut gu_v = Vector3::new(gu[0], gu[1], gu[2]);
-        let mut gu_w = Vector3::new(gu[3], gu[4], gu[5]);
-        if let Some(port) = x.port {
-            let (dv, dw) = port_correction(port, x, &u, &v, &w);
-            gu_v += dv;
-            gu_w += dw;
-        }
+        let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
+        let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
         let d_v = match x.measurement.acc_body_m_s2 {
             Some(acc) if crate::fpu::all_finite(acc.iter().copied()) => acc * m - gu_v,
@@ -594,7 +589,15 @@ impl Adaptation {
             }
         };
         let jw = x.inertia * w;
-        let d_w = x.inertia * ((w - prev_w) * (1.0 / dt_s)) - jw.cross(&w) - gu_w;
+        let mut d_w = x.inertia * ((w - prev_w) * (1.0 / dt_s)) - jw.cross(&w) - gu_w;
+        let mut d_v = d_v;
+        if let Some(port) = x.port {
+            // The port terms' share of the known momentum rate, out of line.
+            let up = Vector3::new(x.rot.m31, x.rot.m32, x.rot.m33);
+            let (dv, dw) = port_correction(port, x.gain, &up, &u, &v, &w);
+            d_v -= dv;
+            d_w -= dw;
+        }
         // Scale the rows to a's units.
         let (sf, st) = (1.0 / m, 1.0 / TORQUE_UNIT_NM);
         let z = [
@@ -815,15 +818,15 @@ impl Adaptation {
 #[inline(never)]
 fn port_correction(
     port: &crate::model::PortTerms,
-    x: &PredictionInput<'_>,
+    gain: &SMatrix<f32, 6, 4>,
+    up: &Vector3<f32>,
     u: &Vector4<f32>,
     v: &Vector3<f32>,
     w: &Vector3<f32>,
 ) -> (Vector3<f32>, Vector3<f32>) {
-    let up = Vector3::new(x.rot.m31, x.rot.m32, x.rot.m33);
-    let (f, t) = port.wrench(&up, v, w);
+    let (f, t) = port.wrench(up, v, w);
     let k = port.input_gain();
-    let du = x.gain
+    let du = gain
         * Vector4::new(
             u.x * (k.x - 1.0),
             u.y * (k.y - 1.0),

@@ -719,7 +719,8 @@ impl<M: HamiltonianModel> FlightController<M> {
 
         // Translational law: b_v (body frame).
         let e_p = rt * (state.p_m - sp.p_m);
-        let e_v = v - rt * sp.v_m_s;
+        let v_ref = rt * sp.v_m_s;
+        let e_v = v - v_ref;
         let mut b_v =
             rt * ((Vector3::z() * t.gravity_m_s2 + sp.a_m_s2) * m) - e_p * g.k_p - e_v * g.k_v
                 + w.cross(&e_v) * m
@@ -727,9 +728,8 @@ impl<M: HamiltonianModel> FlightController<M> {
         // The port terms at the reference (docs/math.md "Dissipation, potential and actuator
         // lag"): the law cancels the drag, the gyrator and the learned potential at the
         // reference velocity, so what is left acts on the errors alone and is passive.
-        let b_up = Vector3::new(r.m31, r.m32, r.m33);
-        let v_ref = rt * sp.v_m_s;
         if self.port_active {
+            let b_up = Vector3::new(r.m31, r.m32, r.m33);
             b_v -= self.model.port().wrench(&b_up, &v_ref, w).0;
         }
 
@@ -771,6 +771,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         let pd_w = (e_r * g.k_r + e_w * g.k_w).component_mul(&g.attitude_axis_scale);
         let mut b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
         if self.port_active {
+            let b_up = Vector3::new(r.m31, r.m32, r.m33);
             b_w -= self.model.port().wrench(&b_up, &v_ref, &w_des_body).1;
         }
         Demand {

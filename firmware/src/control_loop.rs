@@ -49,14 +49,15 @@ pub const MODEL_KIND: ModelKind = if cfg!(hamflight_untrained) {
     ModelKind::Learned
 };
 
-/// Decodes and checks the weight blob into `slot` ([`hamflight::blob::decode_into`]: in place,
-/// no copy of the weights on the stack) and builds the model on it.
+/// Decodes and checks the weight blob into `slot` ([`hamflight::blob::decode_model_into`]: in
+/// place, no copy of the weights on the stack; the networks, the mass, the motor lag and the port
+/// terms) and builds the model on it.
 ///
 /// # Errors
 /// The blob's first failed check ([`BlobError`]); `slot` is then unchanged.
 #[cfg(not(hamflight_untrained))]
 pub fn load_model(blob: &[u8], slot: &'static mut LearnedModel) -> Result<Model, BlobError> {
-    hamflight::blob::decode_into(blob, &mut slot.weights)?;
+    hamflight::blob::decode_model_into(blob, slot)?;
     Ok(slot)
 }
 
