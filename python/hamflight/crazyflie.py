@@ -68,6 +68,7 @@ ERROR_NAMES = {
     24: "vehicle mass outside 0.005..5 kg",
     25: "motor time constant outside 0..1 s",
     26: "self test failed (hover thrust not m g +- 20 %)",
+    27: "port terms that cannot fly (an input gain, a lag or a negative dissipation)",
 }
 BLOB_HEADER_LEN = 28
 BLOB_CRC_LEN = 4

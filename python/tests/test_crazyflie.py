@@ -42,7 +42,7 @@ def need_cflib():
         pytest.skip(msg)
 
 
-CAPACITY = 9712
+CAPACITY = 9820
 
 
 class ShimMemory:
