@@ -90,14 +90,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::FitResponse(args) => {
             let r = host_train::pipeline::fit_response::run(&args)?;
             let at = |e: &host_train::train::predict::HorizonErrors| {
-                let last = r.horizon.saturating_sub(1);
-                format!(
-                    "pos {:.4} m, vel {:.3} m/s, att {:.3} rad, rates {:.3} rad/s",
-                    e.pos_mae_m.get(last).copied().unwrap_or(f64::NAN),
-                    e.vel_mae_m_s.get(last).copied().unwrap_or(f64::NAN),
-                    e.att_mae_rad.get(last).copied().unwrap_or(f64::NAN),
-                    e.rate_mae_rad_s.get(last).copied().unwrap_or(f64::NAN)
-                )
+                host_train::train::predict::mae_line(e, r.horizon)
             };
             println!("MAE at {} steps on the fitted windows:", r.horizon);
             println!("  blob alone     {}", at(&r.errors_blob));
@@ -107,14 +100,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::FitPort(args) => {
             let r = host_train::pipeline::fit_port::run(&args)?;
             let at = |e: &host_train::train::predict::HorizonErrors| {
-                let last = r.horizon.saturating_sub(1);
-                format!(
-                    "pos {:.4} m, vel {:.3} m/s, att {:.3} rad, rates {:.3} rad/s",
-                    e.pos_mae_m.get(last).copied().unwrap_or(f64::NAN),
-                    e.vel_mae_m_s.get(last).copied().unwrap_or(f64::NAN),
-                    e.att_mae_rad.get(last).copied().unwrap_or(f64::NAN),
-                    e.rate_mae_rad_s.get(last).copied().unwrap_or(f64::NAN)
-                )
+                host_train::train::predict::mae_line(e, r.horizon)
             };
             let p = &r.port;
             println!("learned ({}):", p.identifiability);

@@ -17,8 +17,8 @@ use hamflight::model::HamiltonianModel;
 use serde::Serialize;
 
 use crate::control::adapter::load_learned;
-use crate::io::dataset::WindowSpec;
 use crate::io::files::write_atomic;
+use crate::pipeline::fit_response::FitWindowArgs;
 use crate::pipeline::prior_check::{self, PriorCheck};
 use crate::sim::scenario::Scenario;
 use crate::train::data;
@@ -37,22 +37,9 @@ pub struct FitPortArgs {
     /// --keep-repeated-states --trim-s 0 …`, so that long windows exist).
     #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
-    /// Predicted steps per window (the benchmark's 50).
-    #[arg(long, default_value_t = 50)]
-    pub horizon: usize,
-    /// Samples between window starts.
-    #[arg(long, default_value_t = 5)]
-    pub stride: usize,
-    /// Windows used at most (thinned evenly): the fit's cost grows with it.
-    #[arg(long, default_value_t = 1500)]
-    pub max_windows: usize,
-    /// Levenberg–Marquardt iterations at most.
-    #[arg(long, default_value_t = 20)]
-    pub iterations: usize,
-    /// The typical errors that weigh the residuals: position (m), velocity (m/s), attitude
-    /// (rad), rates (rad/s).
-    #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.5, 0.2, 0.6])]
-    pub scales: Vec<f64>,
+    /// The windows and the solver.
+    #[command(flatten)]
+    pub fit: FitWindowArgs,
     /// Leave out the learned potential ½ bᵀKb (the pull toward a trim attitude).
     #[arg(long)]
     pub no_tilt: bool,
@@ -121,13 +108,7 @@ pub struct FitPortReport {
 /// An unreadable blob or dataset, bad arguments, no window to fit or score, a fitted model
 /// the blob format refuses, a failure writing FILE.
 pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
-    if args.horizon == 0 || args.stride == 0 || args.max_windows == 0 {
-        bail!("--horizon, --stride and --max-windows must be at least 1");
-    }
-    let scales: [f64; 4] = match args.scales.as_slice() {
-        &[p, v, a, w] if [p, v, a, w].iter().all(|x| x.is_finite() && *x > 0.0) => [p, v, a, w],
-        _ => bail!("--scales takes four positive numbers: position, velocity, attitude, rates"),
-    };
+    let scales = args.fit.checked_scales()?;
     let t0 = Instant::now();
     let mut base = load_learned(&args.weights)?;
     if let Some(tau) = args.motor_tau_s {
@@ -141,15 +122,12 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         .iter()
         .map(Scenario::load)
         .collect::<Result<Vec<_>>>()?;
-    let spec = WindowSpec {
-        len: args.horizon + 1,
-        stride: args.stride,
-    };
+    let spec = args.fit.spec();
     let data = data::load(&args.data, spec).with_context(|| {
         format!(
             "the fit needs windows of {} continuous states (--horizon {}); import the flights \
              with --keep-repeated-states --trim-s 0 so that long stretches stay whole",
-            spec.len, args.horizon
+            spec.len, args.fit.horizon
         )
     })?;
     let held = |i: usize| -> bool {
@@ -168,12 +146,8 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
     };
     let (fit_all, held_all): (Vec<usize>, Vec<usize>) =
         (0..data.windows.len()).partition(|&i| !held(i));
-    let thin = |v: Vec<usize>| -> Vec<usize> {
-        let every = v.len().div_ceil(args.max_windows).max(1);
-        v.into_iter().step_by(every).collect()
-    };
-    let ids = thin(fit_all);
-    let held_ids = thin(held_all);
+    let ids = args.fit.thin(fit_all);
+    let held_ids = args.fit.thin(held_all);
     if ids.is_empty() {
         bail!("no window left to fit on");
     }
@@ -189,7 +163,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         drag: !args.no_drag,
     };
     let cfg = PortFitConfig {
-        iterations: args.iterations,
+        iterations: args.fit.iterations,
         scales,
         structure,
         ..PortFitConfig::default()
@@ -198,7 +172,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         eprintln!(
             "fitting the port terms on {} windows of {} steps ({} threads){}",
             ids.len(),
-            args.horizon,
+            args.fit.horizon,
             cfg.threads,
             args.hold_out
                 .as_ref()
@@ -247,7 +221,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         data: args.data.display().to_string(),
         hold_out: args.hold_out.clone(),
         windows: ids.len(),
-        horizon: args.horizon,
+        horizon: args.fit.horizon,
         steps,
         errors_start: response_errors(&base, &id, &data, &ids),
         errors_fitted: response_errors(&model, &id, &data, &ids),

@@ -22,16 +22,9 @@ use crate::train::data;
 use crate::train::predict::HorizonErrors;
 use crate::train::response::{self, FitConfig, FitStep, ForceTerms, Response};
 
-/// Arguments of `host-train fit-response`.
+/// The windows a fit runs on and its solver, shared by `fit-response` and `fit-port`.
 #[derive(Args, Debug, Clone)]
-pub struct FitResponseArgs {
-    /// The weight blob whose predictions the response completes (`train`'s FILE.hfw).
-    #[arg(long, value_name = "FILE.hfw")]
-    pub weights: PathBuf,
-    /// The dataset to fit on (training flights, imported with every state kept: `import
-    /// --keep-repeated-states --trim-s 0 …`, so that long windows exist).
-    #[arg(long, value_name = "DIR")]
-    pub data: PathBuf,
+pub struct FitWindowArgs {
     /// Predicted steps per window (the benchmark's 50).
     #[arg(long, default_value_t = 50)]
     pub horizon: usize,
@@ -48,6 +41,53 @@ pub struct FitResponseArgs {
     /// (m/s), attitude (rad), rates (rad/s); a smaller scale weighs that quantity more.
     #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.5, 0.2, 0.6])]
     pub scales: Vec<f64>,
+}
+
+impl FitWindowArgs {
+    /// The checked scales.
+    ///
+    /// # Errors
+    /// A zero horizon, stride or window count; scales that are not four positive numbers.
+    pub fn checked_scales(&self) -> Result<[f64; 4]> {
+        if self.horizon == 0 || self.stride == 0 || self.max_windows == 0 {
+            bail!("--horizon, --stride and --max-windows must be at least 1");
+        }
+        match self.scales.as_slice() {
+            &[p, v, a, w] if [p, v, a, w].iter().all(|x| x.is_finite() && *x > 0.0) => {
+                Ok([p, v, a, w])
+            }
+            _ => bail!("--scales takes four positive numbers: position, velocity, attitude, rates"),
+        }
+    }
+
+    /// The window shape: horizon + 1 states every `stride` samples.
+    pub fn spec(&self) -> WindowSpec {
+        WindowSpec {
+            len: self.horizon + 1,
+            stride: self.stride,
+        }
+    }
+
+    /// `ids` thinned evenly to at most `max_windows`.
+    pub fn thin(&self, ids: Vec<usize>) -> Vec<usize> {
+        let every = ids.len().div_ceil(self.max_windows).max(1);
+        ids.into_iter().step_by(every).collect()
+    }
+}
+
+/// Arguments of `host-train fit-response`.
+#[derive(Args, Debug, Clone)]
+pub struct FitResponseArgs {
+    /// The weight blob whose predictions the response completes (`train`'s FILE.hfw).
+    #[arg(long, value_name = "FILE.hfw")]
+    pub weights: PathBuf,
+    /// The dataset to fit on (training flights, imported with every state kept: `import
+    /// --keep-repeated-states --trim-s 0 …`, so that long windows exist).
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// The windows and the solver.
+    #[command(flatten)]
+    pub fit: FitWindowArgs,
     /// The velocity term's force rows: `drag` (a linear drag per body axis), `full` (v̇ from
     /// every component of v and ω) or `none`.
     #[arg(long, value_enum, default_value_t = ForceTerms::Drag)]
@@ -119,34 +159,24 @@ pub fn load_response(path: &std::path::Path) -> Result<Response> {
 /// An unreadable blob or dataset, a zero horizon, stride or window count, no window of
 /// horizon + 1 continuous states, a failure writing FILE.
 pub fn run(args: &FitResponseArgs) -> Result<FitReport> {
-    if args.horizon == 0 || args.stride == 0 || args.max_windows == 0 {
-        bail!("--horizon, --stride and --max-windows must be at least 1");
-    }
-    let scales: [f64; 4] = match args.scales.as_slice() {
-        &[p, v, a, w] if [p, v, a, w].iter().all(|x| x.is_finite() && *x > 0.0) => [p, v, a, w],
-        _ => bail!("--scales takes four positive numbers: position, velocity, attitude, rates"),
-    };
+    let scales = args.fit.checked_scales()?;
     let t0 = Instant::now();
     let model = load_learned(&args.weights)?;
-    let spec = WindowSpec {
-        len: args.horizon + 1,
-        stride: args.stride,
-    };
+    let spec = args.fit.spec();
     let data = data::load(&args.data, spec).with_context(|| {
         format!(
             "the fit needs windows of {} continuous states (--horizon {}); import the flights \
              with --keep-repeated-states --trim-s 0 so that long stretches stay whole",
-            spec.len, args.horizon
+            spec.len, args.fit.horizon
         )
     })?;
     let n = data.windows.len();
-    let every = n.div_ceil(args.max_windows).max(1);
-    let ids: Vec<usize> = (0..n).step_by(every).collect();
+    let ids = args.fit.thin((0..n).collect());
     if !args.quiet {
         eprintln!(
             "fitting the response on {} of {n} windows of {} steps ({} threads)",
             ids.len(),
-            args.horizon,
+            args.fit.horizon,
             FitConfig::default().threads
         );
     }
@@ -157,7 +187,7 @@ pub fn run(args: &FitResponseArgs) -> Result<FitReport> {
         ..Response::identity()
     };
     let cfg = FitConfig {
-        iterations: args.iterations,
+        iterations: args.fit.iterations,
         scales,
         force: args.force_terms,
         tilt: !args.no_tilt,
@@ -182,7 +212,7 @@ pub fn run(args: &FitResponseArgs) -> Result<FitReport> {
         weights: args.weights.display().to_string(),
         data: args.data.display().to_string(),
         windows: ids.len(),
-        horizon: args.horizon,
+        horizon: args.fit.horizon,
         steps,
         elapsed_s: t0.elapsed().as_secs_f64(),
     };

@@ -134,3 +134,15 @@ pub fn model_errors<M: HamiltonianModel>(
 ) -> HorizonErrors {
     rollout_errors(model, data, ids, None, &[])
 }
+
+/// The four MAEs of `e` at step `step` (1-based), for a one-line summary.
+pub fn mae_line(e: &HorizonErrors, step: usize) -> String {
+    let k = step.saturating_sub(1);
+    format!(
+        "pos {:.4} m, vel {:.3} m/s, att {:.3} rad, rates {:.3} rad/s",
+        e.pos_mae_m.get(k).copied().unwrap_or(f64::NAN),
+        e.vel_mae_m_s.get(k).copied().unwrap_or(f64::NAN),
+        e.att_mae_rad.get(k).copied().unwrap_or(f64::NAN),
+        e.rate_mae_rad_s.get(k).copied().unwrap_or(f64::NAN)
+    )
+}
