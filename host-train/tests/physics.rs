@@ -210,25 +210,3 @@ fn motor_lag_is_first_order() {
     let expect = 20000.0 - 10000.0 * (-1.0f64).exp();
     assert!((plant.rotor_rpm()[0] - expect).abs() < 1e-3);
 }
-
-/// Plant speed (simulated s per wall s) at 1 kHz physics; run with
-/// `cargo test -p host-train --release --test physics -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn plant_speed() {
-    let mut plant = Plant::nominal(PlantState::at_rest(Vector3::new(0.0, 0.0, 1.0), 0.0));
-    let h = plant.params.hover_rpm();
-    let n = 1_000_000;
-    let t0 = std::time::Instant::now();
-    for k in 0..n {
-        let d = if k % 2 == 0 { 10.0 } else { -10.0 };
-        plant.step([h + d, h - d, h + d, h - d], DT);
-    }
-    let wall = t0.elapsed().as_secs_f64();
-    println!(
-        "plant: {n} steps of 1 ms in {wall:.3} s = {:.0} simulated s per wall s ({:.0} ns/step)",
-        n as f64 * DT / wall,
-        wall / n as f64 * 1e9
-    );
-    assert!(plant.state().is_finite());
-}
