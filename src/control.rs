@@ -729,8 +729,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         // lag"): the law cancels the drag, the gyrator and the learned potential at the
         // reference velocity, so what is left acts on the errors alone and is passive.
         if self.port_active {
-            let b_up = Vector3::new(r.m31, r.m32, r.m33);
-            b_v -= self.model.port().wrench(&b_up, &v_ref, w).0;
+            b_v -= self.model.port().force(&v_ref, w);
         }
 
         // Desired attitude from the force the law wants. Its rate Ḟ ≈ m p⃛*, and with the
@@ -772,7 +771,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         let mut b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
         if self.port_active {
             let b_up = Vector3::new(r.m31, r.m32, r.m33);
-            b_w -= self.model.port().wrench(&b_up, &v_ref, &w_des_body).1;
+            b_w -= self.model.port().torque(&b_up, &v_ref, &w_des_body);
         }
         Demand {
             b_act: Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z),

@@ -103,35 +103,49 @@ impl PortTerms {
     }
 
     /// The port wrench (force N, torque N·m; body frame) at the world vertical `b` = Rᵀe₃ and
-    /// the body velocities `v` (m/s) and `w` (rad/s): (−D_v v − Bᵀω, −D_ω ω + B v + b × K b).
-    /// Out of line and written per component: it has three callers in the control step.
-    #[inline(never)]
+    /// the body velocities `v` (m/s) and `w` (rad/s): ([`PortTerms::force`],
+    /// [`PortTerms::torque`]).
+    #[inline]
     pub fn wrench(
         &self,
         b: &Vector3<f32>,
         v: &Vector3<f32>,
         w: &Vector3<f32>,
     ) -> (Vector3<f32>, Vector3<f32>) {
+        (self.force(v, w), self.torque(b, v, w))
+    }
+
+    /// The port force (N, body frame) at the body velocities `v` (m/s) and `w` (rad/s):
+    /// −D_v v − Bᵀω. Out of line and written per component: the control step calls it and
+    /// [`PortTerms::torque`] at different velocities.
+    #[inline(never)]
+    pub fn force(&self, v: &Vector3<f32>, w: &Vector3<f32>) -> Vector3<f32> {
         let [[b00, b01, b02], [b10, b11, b12], [b20, b21, b22]] = self.gyrator_nm_s_m;
         let [dvx, dvy, dvz] = self.drag_n_s_m;
-        let [dwx, dwy, dwz] = self.rate_damping_nm_s;
-        let [k11, k22, k33, k12, k13, k23] = self.tilt_stiffness_nm;
-        let force = Vector3::new(
+        Vector3::new(
             -dvx * v.x - (b00 * w.x + b10 * w.y + b20 * w.z),
             -dvy * v.y - (b01 * w.x + b11 * w.y + b21 * w.z),
             -dvz * v.z - (b02 * w.x + b12 * w.y + b22 * w.z),
-        );
+        )
+    }
+
+    /// The port torque (N·m, body frame) at the world vertical `b` = Rᵀe₃ and the body
+    /// velocities `v` (m/s) and `w` (rad/s): −D_ω ω + B v + b × K b.
+    #[inline(never)]
+    pub fn torque(&self, b: &Vector3<f32>, v: &Vector3<f32>, w: &Vector3<f32>) -> Vector3<f32> {
+        let [[b00, b01, b02], [b10, b11, b12], [b20, b21, b22]] = self.gyrator_nm_s_m;
+        let [dwx, dwy, dwz] = self.rate_damping_nm_s;
+        let [k11, k22, k33, k12, k13, k23] = self.tilt_stiffness_nm;
         let kb = Vector3::new(
             k11 * b.x + k12 * b.y + k13 * b.z,
             k12 * b.x + k22 * b.y + k23 * b.z,
             k13 * b.x + k23 * b.y + k33 * b.z,
         );
-        let torque = Vector3::new(
+        Vector3::new(
             -dwx * w.x + (b00 * v.x + b01 * v.y + b02 * v.z),
             -dwy * w.y + (b10 * v.x + b11 * v.y + b12 * v.z),
             -dwz * w.z + (b20 * v.x + b21 * v.y + b22 * v.z),
-        ) + b.cross(&kb);
-        (force, torque)
+        ) + b.cross(&kb)
     }
 
     /// Checks that the terms can be flown: finite, gains in range, lags in range, D ⪰ 0.
