@@ -7,12 +7,13 @@
 //! overrides the scenarios' motor lag; `--truth` flies the same scenarios without the chain.
 
 use hamflight::model::NominalModel;
-use hamflight::{AdaptationLaw, Gains, VehicleFacts};
+use hamflight::{Gains, VehicleFacts};
 use host_train::control::adapter::CoreController;
 use host_train::control::controller::Controller;
 use host_train::control::{adapter, registry};
 use host_train::fly::eval::{self, Report};
 use host_train::sim::scenario::Scenario;
+use host_train::{ControllerSpec, ModelSource};
 use std::path::PathBuf;
 
 /// Gain overrides for experiments (`--set key=value`).
@@ -68,32 +69,28 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
     if o.0.is_empty() && facts_tau.is_none() && WEIGHTS.get().is_none() {
         return registry::by_name(name, sc, None).expect("controller");
     }
-    let law = if name.ends_with("-composite") {
-        AdaptationLaw::Composite
-    } else {
-        AdaptationLaw::Gradient
-    };
-    let mk = |model_facts: VehicleFacts, adapt: bool| {
+    let spec = ControllerSpec::parse(name).expect("controller name");
+    let mk = |model_facts: VehicleFacts| {
         let mut f = model_facts;
         if let Some(t) = facts_tau {
             f.motor_tau_s = t;
         }
-        let mut g = Gains::for_vehicle(&f);
-        g.adapt = adapt;
-        g.law = law;
+        let mut g = spec.gains(Gains::for_vehicle(&f));
         o.apply(&mut g);
         g
     };
-    if name.starts_with("adaptive") || name == "learned" {
-        let m = adapter::load_learned(&weights()).expect("blob");
-        let g = mk(VehicleFacts::of(&m), name != "learned");
-        Box::new(CoreController::new(name, m, g))
-    } else if name.starts_with("geometric-adaptive") || name == "ida-pbc" {
-        let m = NominalModel::default();
-        let g = mk(VehicleFacts::of(&m), name != "ida-pbc");
-        Box::new(CoreController::new(name, m, g))
-    } else {
-        registry::by_name(name, sc, None).expect("controller")
+    match spec.model() {
+        Some(ModelSource::Learned) => {
+            let m = adapter::load_learned(&weights()).expect("blob");
+            let g = mk(VehicleFacts::of(&m));
+            Box::new(CoreController::new(name, m, g))
+        }
+        Some(ModelSource::Nominal) => {
+            let m = NominalModel::default();
+            let g = mk(VehicleFacts::of(&m));
+            Box::new(CoreController::new(name, m, g))
+        }
+        None => registry::by_name(name, sc, None).expect("controller"),
     }
 }
 

@@ -36,6 +36,7 @@ pub mod sim;
 pub mod train;
 
 pub use control::controller::Controller;
+pub use control::spec::{ControllerSpec, ModelSource};
 pub use sim::plant::{Plant, PlantState, VehicleParams};
 pub use sim::scenario::Scenario;
 pub use sim::trajectory::TrajectoryPoint;

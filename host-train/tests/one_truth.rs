@@ -69,10 +69,8 @@ fn the_default_law_is_named_truly() {
         #[allow(unreachable_patterns)]
         _ => "composite",
     };
-    let registry = host_train::control::registry::CORE_CONTROLLERS
-        .iter()
-        .find(|(n, _)| *n == "adaptive")
-        .map(|(_, d)| d.to_lowercase())
+    let registry = host_train::control::spec::ControllerSpec::parse("adaptive")
+        .map(|s| s.about.to_lowercase())
         .expect("`adaptive` is registered");
     assert!(
         registry.contains(name),
@@ -80,20 +78,32 @@ fn the_default_law_is_named_truly() {
     );
 }
 
-/// `eval --controller`'s help names every controller of the registry, the one list of names.
+/// `eval --controller`'s help names every controller of the registry, the one list of names,
+/// and `bridge --controller`'s every core controller.
 #[test]
 fn eval_help_names_every_registered_controller() {
     use clap::Args;
-    let cmd = host_train::fly::eval::EvalArgs::augment_args(clap::Command::new("eval"));
-    let help = cmd
-        .get_arguments()
-        .find(|a| a.get_id() == "controller")
-        .and_then(|a| a.get_help())
-        .expect("`--controller` has a help")
-        .to_string();
+    let help_of = |cmd: clap::Command| -> String {
+        let mut cmd = cmd;
+        cmd.render_long_help().to_string()
+    };
+    let help = help_of(host_train::fly::eval::EvalArgs::augment_args(
+        clap::Command::new("eval"),
+    ));
     let words: Vec<&str> = help
         .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
         .collect();
+    let bridge = help_of(host_train::bridge::BridgeArgs::augment_args(
+        clap::Command::new("bridge"),
+    ));
+    for name in host_train::control::spec::core_names() {
+        assert!(
+            bridge
+                .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+                .any(|w| w == name),
+            "`bridge --controller`'s help does not name `{name}`: {bridge}"
+        );
+    }
     for name in host_train::control::registry::names() {
         assert!(
             words.contains(&name),

@@ -17,6 +17,7 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::arrays::{leading_dim, read3, read33, read_vec};
 use crate::blob::{model_from_weights, Blob};
+use host_train::{ControllerSpec, ModelSource};
 
 /// The learned model (shared, about 10 KB) or the nominal one.
 #[derive(Clone, Debug)]
@@ -178,38 +179,20 @@ pub fn named(name: &str, weights: Option<&Bound<'_, PyAny>>) -> PyResult<(AnyMod
             _ => Ok(AnyModel::Learned(crate::blob::default_model()?)),
         }
     };
-    let nominal = AnyModel::Nominal(NominalModel::default());
-    let with = |m: AnyModel, f: &dyn Fn(&mut Gains)| {
-        let mut g = default_gains(&m);
-        f(&mut g);
-        (m, g)
+    let spec =
+        ControllerSpec::parse_core(name).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let model = match spec.model() {
+        Some(ModelSource::Learned) => learned()?,
+        _ => AnyModel::Nominal(NominalModel::default()),
     };
-    Ok(match name {
-        // The plain names fly the default law (the composite one), the named ones theirs.
-        "adaptive" => with(learned()?, &|_| ()),
-        "adaptive-gradient" => with(learned()?, &|g| g.law = AdaptationLaw::Gradient),
-        "adaptive-composite" => with(learned()?, &|g| g.law = AdaptationLaw::Composite),
-        "learned" => with(learned()?, &|g| g.adapt = false),
-        "geometric-adaptive" => with(nominal, &|_| ()),
-        "geometric-adaptive-gradient" => with(nominal, &|g| g.law = AdaptationLaw::Gradient),
-        "geometric-adaptive-composite" => with(nominal, &|g| g.law = AdaptationLaw::Composite),
-        "ida-pbc" => with(nominal, &|g| g.adapt = false),
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "unknown controller {name:?}: expected one of {}",
-                core_names().join(", ")
-            )))
-        }
-    })
+    let gains = spec.gains(default_gains(&model));
+    Ok((model, gains))
 }
 
 /// The names [`named`] knows: the host registry's core controllers
-/// ([`host_train::control::registry::CORE_CONTROLLERS`]).
+/// ([`ControllerSpec::ALL`]).
 pub fn core_names() -> Vec<&'static str> {
-    host_train::control::registry::CORE_CONTROLLERS
-        .iter()
-        .map(|(n, _)| *n)
-        .collect()
+    host_train::control::spec::core_names()
 }
 
 /// A setpoint: desired position and its derivatives (world frame) and yaw.

@@ -35,8 +35,9 @@ pub struct BridgeArgs {
     /// Weight blob of the learned model (for `adaptive` and `learned`).
     #[arg(long, value_name = "FILE", default_value = "weights/default.hfw")]
     pub weights: PathBuf,
-    /// Core controller to run: adaptive, learned, geometric-adaptive or ida-pbc.
-    #[arg(long, value_name = "NAME", default_value = "adaptive")]
+    /// Core controller to run.
+    #[arg(long, value_name = "NAME", default_value = "adaptive",
+          value_parser = crate::control::spec::core_parser())]
     pub controller: String,
     /// Tick length (s) assumed for the first request.
     #[arg(long, default_value_t = 0.002)]

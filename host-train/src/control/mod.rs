@@ -4,3 +4,4 @@ pub mod adapter;
 pub mod baselines;
 pub mod controller;
 pub mod registry;
+pub mod spec;

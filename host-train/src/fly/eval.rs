@@ -333,11 +333,8 @@ pub struct EvalArgs {
     /// Scenario TOML file to fly (see scenarios/*.toml for the keys).
     #[arg(long, value_name = "FILE")]
     pub scenario: PathBuf,
-    /// Controller to fly: pid, geometric, ida-pbc, geometric-adaptive, learned or adaptive, or
-    /// an adaptive one with its law named (adaptive-gradient, adaptive-composite,
-    /// geometric-adaptive-gradient, geometric-adaptive-composite) (default: the scenario's
-    /// `controller` key, else `geometric`).
-    #[arg(long, value_name = "NAME")]
+    /// Controller to fly (default: the scenario's `controller` key, else `geometric`).
+    #[arg(long, value_name = "NAME", value_parser = crate::control::spec::parser())]
     pub controller: Option<String>,
     /// Weight blob of the learned model, for `learned` and `adaptive*`.
     #[arg(long, value_name = "FILE", default_value = crate::control::registry::DEFAULT_WEIGHTS)]

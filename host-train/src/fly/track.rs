@@ -224,14 +224,19 @@ fn track_both<M: HamiltonianModel + Clone>(
 /// `--bandwidth`, `bandwidth.svg`.
 pub fn run_track(args: &TrackArgs) -> Result<TrackReport> {
     let sc = Scenario::load(&args.scenario)?;
-    let report = match args.controller.as_str() {
-        "adaptive" => track_both(
-            args,
-            &sc,
-            crate::control::adapter::load_learned(&args.weights)?,
-        )?,
-        "geometric-adaptive" => track_both(args, &sc, hamflight::model::NominalModel::default())?,
-        other => anyhow::bail!(
+    let spec = crate::control::spec::ControllerSpec::parse(&args.controller)?;
+    let report = match (spec.name, spec.model()) {
+        ("adaptive" | "geometric-adaptive", Some(crate::control::spec::ModelSource::Learned)) => {
+            track_both(
+                args,
+                &sc,
+                crate::control::adapter::load_learned(&args.weights)?,
+            )?
+        }
+        ("adaptive" | "geometric-adaptive", Some(crate::control::spec::ModelSource::Nominal)) => {
+            track_both(args, &sc, hamflight::model::NominalModel::default())?
+        }
+        (other, _) => anyhow::bail!(
             "--controller {other}: track flies `adaptive` or `geometric-adaptive` (both laws each)"
         ),
     };
