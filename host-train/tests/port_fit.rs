@@ -117,8 +117,14 @@ fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
         iterations: 30,
         ..PortFitConfig::default()
     };
-    let (fitted, steps) =
-        port_fit::fit(&base, &data, &ids, &port_fit::default_start(), &cfg, |_| {});
+    let (fitted, steps) = port_fit::fit(
+        &base,
+        &data,
+        &ids,
+        &port_fit::default_start(&cfg.structure),
+        &cfg,
+        |_| {},
+    );
     let first = steps.first().map(|s| s.cost).unwrap_or(f64::NAN);
     let last = steps.last().map(|s| s.cost).unwrap_or(f64::NAN);
     assert!(
@@ -167,4 +173,42 @@ fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
     let r = port_fit::report(&fitted);
     assert!((r.torque_lag_s - 0.04).abs() < 0.004, "{}", r.torque_lag_s);
     assert!((r.drag_per_s[2] - 0.9).abs() < 0.09, "{:?}", r.drag_per_s);
+}
+
+#[test]
+fn pinned_torque_gains_stay_at_the_description_and_the_rest_is_recovered() {
+    let base = base_model();
+    let scaling = Scaling::of(&base);
+    let mut p_true = truth_params();
+    p_true[1..4].copy_from_slice(&[1.0, 1.0, 1.0]);
+    let truth = base.with_port(scaling.to_port(&p_true));
+    let data = synthetic(&truth, 80, 11);
+    let ids: Vec<usize> = (0..data.windows.len()).collect();
+    let mut cfg = PortFitConfig {
+        iterations: 30,
+        ..PortFitConfig::default()
+    };
+    cfg.structure.torque_gains = false;
+    let start = port_fit::default_start(&cfg.structure);
+    assert_eq!(
+        start.torque_gain_offset, [0.0; 3],
+        "pinned gains start at 1"
+    );
+    let (fitted, _) = port_fit::fit(&base, &data, &ids, &start, &cfg, |_| {});
+    let p_fit = scaling.to_params(fitted.port());
+    for (i, k) in p_fit.iter().enumerate().take(4).skip(1) {
+        assert_eq!(*k, 1.0, "torque gain {i} moved: {k}");
+    }
+    for (name, i) in [
+        ("torque lag", 5),
+        ("roll damping", 9),
+        ("flapping roll per v_y", 13),
+        ("tilt k11", 21),
+    ] {
+        let (t, f) = (p_true[i], p_fit[i]);
+        assert!(
+            (f - t).abs() <= 0.1 * t.abs(),
+            "{name}: fitted {f:.4}, true {t:.4}"
+        );
+    }
 }

@@ -49,6 +49,12 @@ pub struct FitPortArgs {
     /// Leave out the rotor drag.
     #[arg(long)]
     pub no_drag: bool,
+    /// Hold the torques' effective gains at the starting blob's (the vehicle description's)
+    /// instead of fitting them: flights flown in closed loop bias free torque gains toward zero
+    /// (the onboard controller's torques cancel moments the model may not have), and a blob
+    /// with such gains over-drives the real rotors.
+    #[arg(long)]
+    pub pin_torque_gains: bool,
     /// Leave out the flights whose file name (the imported log's, else the dataset's) starts
     /// with TYPE from the fit and score them (model selection on the training flights: leave
     /// one flight type out).
@@ -161,6 +167,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         tilt: !args.no_tilt,
         gyrator: !args.no_gyrator,
         drag: !args.no_drag,
+        torque_gains: !args.pin_torque_gains,
     };
     let cfg = PortFitConfig {
         iterations: args.fit.iterations,
@@ -181,17 +188,24 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         );
     }
     let quiet = args.quiet;
-    let (model, steps) = port_fit::fit(&base, &data, &ids, &port_fit::default_start(), &cfg, |s| {
-        if !quiet {
-            eprintln!(
-                "  iteration {:>2}: cost {:.5} (λ {:.1e}, {:.1} s)",
-                s.iteration,
-                s.cost,
-                s.lambda,
-                t0.elapsed().as_secs_f64()
-            );
-        }
-    });
+    let (model, steps) = port_fit::fit(
+        &base,
+        &data,
+        &ids,
+        &port_fit::default_start(&structure),
+        &cfg,
+        |s| {
+            if !quiet {
+                eprintln!(
+                    "  iteration {:>2}: cost {:.5} (λ {:.1e}, {:.1} s)",
+                    s.iteration,
+                    s.cost,
+                    s.lambda,
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+        },
+    );
     model
         .port()
         .validate()

@@ -44,6 +44,10 @@ pub struct PortStructure {
     pub gyrator: bool,
     /// The rotor drag D_v.
     pub drag: bool,
+    /// The torques' effective gains k_τ (else held at the starting blob's, the vehicle
+    /// description's 1: on flights flown in closed loop, a moment the onboard controller
+    /// cancels is correlated with its torque commands and biases free gains toward zero).
+    pub torque_gains: bool,
 }
 
 impl Default for PortStructure {
@@ -52,6 +56,7 @@ impl Default for PortStructure {
             tilt: true,
             gyrator: true,
             drag: true,
+            torque_gains: true,
         }
     }
 }
@@ -194,11 +199,13 @@ impl Default for PortFitConfig {
     }
 }
 
-/// Where a fit starts: the torques weak and lagged (a full-gain start diverges on real logs),
-/// nothing else.
-pub fn default_start() -> PortTerms {
+/// Where a fit of `structure` starts: the torques lagged and, when their gains are free, weak
+/// (a full-gain start of free gains diverges on real logs); nothing else.
+pub fn default_start(structure: &PortStructure) -> PortTerms {
     let mut t = PortTerms::IDENTITY;
-    t.torque_gain_offset = [-0.9; 3];
+    if structure.torque_gains {
+        t.torque_gain_offset = [-0.9; 3];
+    }
     t.torque_lag_s = 0.05;
     t
 }
@@ -221,6 +228,7 @@ pub fn fit(
                 || (!s.tilt && TILT.contains(&i))
                 || (!s.gyrator && GYRATOR.contains(&i))
                 || (!s.drag && DRAG.contains(&i))
+                || (!s.torque_gains && TORQUE_GAIN.contains(&i))
         })
         .collect();
     let project = |q: &mut [f64]| {
