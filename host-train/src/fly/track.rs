@@ -224,20 +224,28 @@ fn track_both<M: HamiltonianModel + Clone>(
 /// `--bandwidth`, `bandwidth.svg`.
 pub fn run_track(args: &TrackArgs) -> Result<TrackReport> {
     let sc = Scenario::load(&args.scenario)?;
-    let spec = crate::control::spec::ControllerSpec::parse(&args.controller)?;
-    let report = match (spec.name, spec.model()) {
-        ("adaptive" | "geometric-adaptive", Some(crate::control::spec::ModelSource::Learned)) => {
-            track_both(
-                args,
-                &sc,
-                crate::control::adapter::load_learned(&args.weights)?,
-            )?
-        }
-        ("adaptive" | "geometric-adaptive", Some(crate::control::spec::ModelSource::Nominal)) => {
-            track_both(args, &sc, hamflight::model::NominalModel::default())?
-        }
-        (other, _) => anyhow::bail!(
-            "--controller {other}: track flies `adaptive` or `geometric-adaptive` (both laws each)"
+    use crate::control::spec::{ControllerKind, ControllerSpec, ModelSource};
+    let spec = ControllerSpec::parse(&args.controller)?;
+    // Track flies both laws on the name's model: a name that picks a law or turns adaptation
+    // off is refused.
+    let report = match spec.kind {
+        ControllerKind::Core {
+            model: ModelSource::Learned,
+            adapt: true,
+            law: None,
+        } => track_both(
+            args,
+            &sc,
+            crate::control::adapter::load_learned(&args.weights)?,
+        )?,
+        ControllerKind::Core {
+            model: ModelSource::Nominal,
+            adapt: true,
+            law: None,
+        } => track_both(args, &sc, hamflight::model::NominalModel::default())?,
+        _ => anyhow::bail!(
+            "--controller {}: track flies `adaptive` or `geometric-adaptive` (both laws each)",
+            spec.name
         ),
     };
     std::fs::create_dir_all(&args.out)
