@@ -5,7 +5,7 @@ mod train_common;
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, State, FEATURES};
-use host_train::train::r#loop::init_weights;
+use host_train::train::epochs::init_weights;
 use host_train::train::tensor_model::{to_vec, Consts, Forcing, TModel};
 use nalgebra::Vector4;
 use rand::{Rng, SeedableRng};
@@ -248,7 +248,7 @@ fn host_network_jacobians_match_finite_differences() {
 #[test]
 fn fast_training_loss_matches_the_reference_ops() {
     use host_train::train::data::{self, RealizationInfo, Window, Windows};
-    use host_train::train::r#loop::{batch_loss, batch_loss_reference};
+    use host_train::train::loss::{batch_loss, batch_loss_reference};
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let n_real = 3;
     let windows: Vec<Window> = (0..1100)
@@ -328,7 +328,7 @@ fn fast_training_loss_matches_the_reference_ops() {
 #[test]
 fn split_minibatch_gradients_equal_the_whole_batch() {
     use host_train::data::collect::{collect, CollectConfig};
-    use host_train::train::r#loop::initial_gradients;
+    use host_train::train::epochs::initial_gradients;
     use host_train::train::{data, TrainConfig};
     let dir = train_common::scratch("split-grads");
     let cc = CollectConfig {
@@ -363,8 +363,8 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
 #[test]
 fn fused_kernel_gradients_equal_burns() {
     use host_train::data::collect::{collect, CollectConfig};
+    use host_train::train::epochs::{gradients_at, initial_params};
     use host_train::train::fused::Isa;
-    use host_train::train::r#loop::{gradients_at, initial_params};
     use host_train::train::{data, TrainConfig};
     let dir = train_common::scratch("fused-grads");
     let cc = CollectConfig {

@@ -7,7 +7,7 @@
 //! machine.
 
 use crate::data::collect::{self, CollectConfig};
-use crate::train::{data, r#loop, TrainConfig};
+use crate::train::{data, epochs, TrainConfig};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
@@ -86,7 +86,7 @@ pub fn run(args: &BenchArgs) -> Result<Vec<BenchRow>> {
             batch,
             ..cfg.clone()
         };
-        let mut runs = r#loop::time_epochs(
+        let mut runs = epochs::time_epochs(
             &c,
             &windows,
             &ids,

@@ -11,8 +11,8 @@
 //! Held-out errors are those of [`super::export::prediction_errors`] at the last step, the
 //! predicted R first projected to the nearest rotation; ‖RᵀR − I‖ is reported alongside.
 
+use super::adam::Adam;
 use super::data::{self, Batch, StateBatch, Windows};
-use super::r#loop::Adam;
 use super::tensor_model::{to_vec, window_loss, TMlp};
 use super::TrainConfig;
 use anyhow::Result;
@@ -210,7 +210,7 @@ impl BlackBox {
         out
     }
 
-    /// The structured model's loss ([`super::r#loop::batch_loss`]): mean over windows of
+    /// The structured model's loss ([`super::loss::batch_loss`]): mean over windows of
     /// Σₙ ℓ_p + ℓ_R + vel_weight ℓ_v + ℓ_ω.
     fn loss(&self, b: &Batch, fixed: &[Tensor<2>], dt: f32, vel_weight: f32) -> Tensor<1> {
         let preds = self.rollout(b, fixed, dt).into_iter().map(|x| StateBatch {

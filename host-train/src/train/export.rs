@@ -7,7 +7,7 @@
 //! true g assumes nominal rotors when it gives no rotor efficiencies.
 
 use super::data::Windows;
-use super::r#loop::{EpochStats, Trained};
+use super::epochs::{EpochStats, Trained};
 use super::TrainConfig;
 use anyhow::Result;
 use hamflight::model::{

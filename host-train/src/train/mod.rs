@@ -5,7 +5,8 @@
 //! - [`data`]: the dataset's windows as tensors, the held-out split;
 //! - [`tensor_model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex +
 //!   autodiff);
-//! - [`r#loop`]: Adam, the epoch loop, the progress bar;
+//! - [`loss`]: the windows' RK4 loss; [`adam`]: the optimizer; [`epochs`]: the epoch loop, its
+//!   stages and the progress bar;
 //! - [`blackbox`]: the black-box MLP baseline and the data-efficiency comparison;
 //! - [`fused`]: the loss and its exact gradient as one hand-fused f32 kernel, what training
 //!   runs (burn's autodiff of [`tensor_model`] is its reference);
@@ -29,13 +30,15 @@
 //!    tensor model, and the fused kernel's loss and gradients against burn's. It must pass
 //!    before the fused path is trusted again.
 
+pub mod adam;
 pub mod backoff;
 pub mod blackbox;
 pub mod data;
+pub mod epochs;
 pub mod export;
 pub mod fused;
-#[path = "loop.rs"]
-pub mod r#loop;
+pub mod init;
+pub mod loss;
 pub mod port_fit;
 pub mod predict;
 pub mod response;
@@ -251,10 +254,10 @@ pub fn fit(cfg: &TrainConfig, data_dir: &Path, quiet: bool) -> Result<Fitted> {
     }
     let (train_ids, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
     let train_ids = data::subset(&windows, &train_ids, cfg.data_frac);
-    let mut trained = r#loop::train(cfg, &windows, &train_ids, &heldout, quiet);
+    let mut trained = epochs::train(cfg, &windows, &train_ids, &heldout, quiet);
     to_hover_feature_basis(&mut trained);
     if cfg.zero_unactuated_gain_rows {
-        trained.weights = r#loop::with_unactuated_gain_rows_zeroed(&trained.weights);
+        trained.weights = epochs::with_unactuated_gain_rows_zeroed(&trained.weights);
     }
     let tau = blob_motor_tau_s(cfg, &windows.vehicle)?;
     let model = hamflight::model::LearnedModel::new(trained.weights).with_motor_tau_s(tau);
@@ -437,7 +440,7 @@ impl TrainArgs {
 /// ([`hamflight::model::learned::hover_feature_basis`]): W' = W T, a_j' = T⁻¹ a_j. The model's
 /// predictions W a_j are unchanged; the adaptation law's rates then act on force and torque
 /// separately. Left as is (with a warning) if W at hover is ill-conditioned.
-pub fn to_hover_feature_basis(trained: &mut r#loop::Trained) {
+pub fn to_hover_feature_basis(trained: &mut epochs::Trained) {
     use hamflight::model::learned::hover_feature_basis;
     let Some(t) = hover_feature_basis(&trained.weights.disturbance) else {
         eprintln!("warning: W at hover is ill-conditioned; features left in the trained basis");

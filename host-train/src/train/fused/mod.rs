@@ -5,7 +5,7 @@
 //!
 //! Eight windows run in lockstep, one per lane of [`V`] (an `[f32; 8]` whose element-wise ops
 //! LLVM vectorizes), and the windows are split over the cores with `std::thread::scope`. The
-//! burn path ([`super::r#loop::batch_loss`] under autodiff) stays the reference it is tested
+//! burn path ([`super::loss::batch_loss`] under autodiff) stays the reference it is tested
 //! against (`host-train/tests/train_parity.rs`).
 //!
 //! Layout of the parameters: the 18 MLP tensors in [`super::tensor_model::TModel::tensors`] order

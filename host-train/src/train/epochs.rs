@@ -1,19 +1,19 @@
-//! The training loop (paper Problem 1): RK4 through each window in (q, 𝔭), each step with its
-//! own logged command and d = W a_j inside the ODE, loss ℓ_p + ℓ_R + ℓ_ζ summed over the window's
-//! predicted states, Adam on θ (J⁻¹, g), φ (W) and the a_j.
+//! The training epochs (paper Problem 1): minibatches of windows through the loss
+//! ([`super::loss`]), Adam ([`super::adam`]) on θ (J⁻¹, g), φ (W) and the a_j, the learning-rate
+//! schedule, the stages (main, features) and the progress bar.
 
-use super::data::StateBatch;
-use super::data::{self, Batch, Windows};
-use super::tensor_model::{
-    rk4_with, to_phase_with, to_vec, velocities_with, window_loss, Consts, Forcing, FusedHeads,
-    TModel,
-};
+pub use super::adam::Adam;
+use super::data::{self, Windows};
+pub use super::init::{init_weights, init_weights_with_prior, with_unactuated_gain_rows_zeroed};
+use super::init::{prior_of, with_rigid_body_pinned, FEATURE_INPUT_WEIGHT, RIGID_BODY_TENSORS};
+pub use super::loss::{batch_loss, batch_loss_reference, eval_loss};
+use super::tensor_model::{to_vec, Consts, TModel};
 use super::{GradientPath, TrainConfig};
 use burn::tensor::{Device, Tensor, TensorData};
 use hamflight::model::{ModelWeights, FEATURES};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -58,203 +58,8 @@ pub struct MainStage {
     pub a: Vec<[f32; FEATURES]>,
 }
 
-/// Initial weights: hidden layers Xavier-uniform from `seed`, output layers scaled by
-/// `out_gain` around the physical prior's biases ([`ModelWeights::prior`]), so J⁻¹, g and W
-/// start near the CF2X's J⁻¹, the true g and the nominal features.
-pub fn init_weights(seed: u64, out_gain: f32) -> ModelWeights {
-    init_weights_with_prior(seed, out_gain, ModelWeights::prior())
-}
-
-/// [`init_weights`] around `prior` (for example a described vehicle's,
-/// [`ModelWeights::prior_with_inertia`]).
-pub fn init_weights_with_prior(seed: u64, out_gain: f32, prior: ModelWeights) -> ModelWeights {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut w = prior;
-    macro_rules! xavier {
-        ($layer:expr, $gain:expr) => {{
-            let fan_in = $layer.weight[0].len() as f32;
-            let fan_out = $layer.weight.len() as f32;
-            let bound = (6.0 / (fan_in + fan_out)).sqrt() * $gain;
-            for v in $layer.weight.iter_mut().flatten() {
-                *v = rng.gen_range(-bound..bound);
-            }
-        }};
-    }
-    xavier!(w.inertia.l0, 1.0);
-    xavier!(w.inertia.l1, 1.0);
-    xavier!(w.inertia.l2, out_gain);
-    xavier!(w.gain.l0, 1.0);
-    xavier!(w.gain.l1, 1.0);
-    xavier!(w.gain.l2, out_gain);
-    xavier!(w.disturbance.l0, 1.0);
-    xavier!(w.disturbance.l1, 1.0);
-    xavier!(w.disturbance.l2, out_gain);
-    w
-}
-
-/// The loss of a batch: Σₙ (ℓ_p + ℓ_R + ℓ_ζ) per window, and its mean over the batch.
-/// `vel_weight` weighs ‖v − v̄‖² inside ℓ_ζ ([`TrainConfig::vel_weight`]).
-pub fn batch_loss(
-    model: &TModel,
-    c: &Consts,
-    a_all: Tensor<2>,
-    b: &Batch,
-    dt_s: f32,
-    vel_weight: f32,
-) -> Tensor<1> {
-    // Each state's head outputs computed once: they serve the velocities read there and the
-    // next step's first RK4 stage. Small batches run the three heads as one network (fewer
-    // ops); large ones apart (the fused layers' zero blocks cost more than the ops saved).
-    let fused = (b.len <= FUSE_MAX_BATCH).then(|| FusedHeads::new(model));
-    let head = fused.as_ref().map_or(&model.inertia, |f| f.inertia_head());
-    let nets_at = |rot: &Tensor<3>| match &fused {
-        Some(f) => f.nets(c, rot),
-        None => model.nets(c, rot),
-    };
-    let s0 = &b.states[0];
-    let n0 = nets_at(&s0.rot);
-    let mut x = to_phase_with(
-        c,
-        &n0.inertia,
-        s0.p.clone(),
-        s0.rot.clone(),
-        s0.v.clone(),
-        s0.w.clone(),
-    );
-    // a_j is selected once per batch (one node in the graph); only the command changes per step.
-    let mut forcing: Option<Forcing> = None;
-    let mut nets = Some(n0);
-    let preds = b.u.iter().map(|u| {
-        let f = match forcing.take() {
-            None => Forcing::new(c, u.clone(), a_all.clone(), b.realization.clone()),
-            Some(prev) => prev.with_control(c, u.clone()),
-        };
-        let n_x = nets.take().unwrap_or_else(|| nets_at(&x.rot));
-        x = rk4_with(c, &nets_at, head, &x, n_x, &f, dt_s);
-        let n = nets_at(&x.rot);
-        let (v, w) = velocities_with(c, &n.inertia, &x);
-        nets = Some(n);
-        forcing = Some(f);
-        StateBatch {
-            p: x.p.clone(),
-            rot: x.rot.clone(),
-            v,
-            w,
-        }
-    });
-    window_loss(preds, b, vel_weight)
-}
-
-/// [`batch_loss`] by the model's plain methods: each head on its own and J⁻¹(q) evaluated
-/// again wherever it is needed. The same value (to rounding); kept as the reference the fused
-/// path is tested against, and timed by `host-train bench-train --reference`.
-pub fn batch_loss_reference(
-    model: &TModel,
-    c: &Consts,
-    a_all: Tensor<2>,
-    b: &Batch,
-    dt_s: f32,
-    vel_weight: f32,
-) -> Tensor<1> {
-    let s0 = &b.states[0];
-    let mut x = model.to_phase(c, s0.p.clone(), s0.rot.clone(), s0.v.clone(), s0.w.clone());
-    let mut forcing: Option<Forcing> = None;
-    let preds = b.u.iter().map(|u| {
-        let f = match forcing.take() {
-            None => Forcing::new(c, u.clone(), a_all.clone(), b.realization.clone()),
-            Some(prev) => prev.with_control(c, u.clone()),
-        };
-        x = model.rk4(c, &x, &f, dt_s);
-        forcing = Some(f);
-        let (v, w) = model.velocities(c, &x);
-        StateBatch {
-            p: x.p.clone(),
-            rot: x.rot.clone(),
-            v,
-            w,
-        }
-    });
-    window_loss(preds, b, vel_weight)
-}
-
-/// Mean held-out loss per window, in chunks, without autodiff.
-pub fn eval_loss(
-    model: &TModel,
-    c: &Consts,
-    a_all: &Tensor<2>,
-    data: &Windows,
-    ids: &[usize],
-    dt_s: f32,
-    vel_weight: f32,
-) -> f64 {
-    let device = &a_all.device();
-    if ids.is_empty() {
-        return f64::NAN;
-    }
-    let mut sum = 0.0;
-    for chunk in ids.chunks(2048) {
-        let b = data::batch(data, chunk, device);
-        let l = batch_loss(model, c, a_all.clone(), &b, dt_s, vel_weight);
-        sum += f64::from(to_vec(&l)[0]) * chunk.len() as f64;
-    }
-    sum / ids.len() as f64
-}
-
-/// Adam (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) on a list of tensors, a learning rate per tensor.
-pub struct Adam {
-    m: Vec<Tensor<2>>,
-    v: Vec<Tensor<2>>,
-    t: i32,
-}
-
-impl Adam {
-    /// Zero moments for `params`.
-    pub fn new(params: &[Tensor<2>]) -> Self {
-        Self {
-            m: params.iter().map(|p| p.zeros_like()).collect(),
-            v: params.iter().map(|p| p.zeros_like()).collect(),
-            t: 0,
-        }
-    }
-
-    /// One Adam step (β₁ = 0.9, β₂ = 0.999, ε = 1e-8) with a learning rate per tensor; a
-    /// tensor without a gradient (`None`) is left as it is.
-    pub fn step(&mut self, params: &mut [Tensor<2>], grads: &[Option<Tensor<2>>], lrs: &[f64]) {
-        self.t += 1;
-        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8f64);
-        let c1 = 1.0 - b1.powi(self.t);
-        let c2 = 1.0 - b2.powi(self.t);
-        for i in 0..params.len() {
-            let Some(g) = grads[i].clone() else {
-                continue;
-            };
-            self.m[i] = self.m[i].clone().mul_scalar(b1) + g.clone().mul_scalar(1.0 - b1);
-            self.v[i] = self.v[i].clone().mul_scalar(b2) + g.square().mul_scalar(1.0 - b2);
-            let mhat = self.m[i].clone().div_scalar(c1);
-            let vhat = self.v[i].clone().div_scalar(c2);
-            let upd = mhat / vhat.sqrt().add_scalar(eps);
-            params[i] = params[i].clone() - upd.mul_scalar(lrs[i]);
-        }
-    }
-}
-
 /// Rotor gains per flight: the CF2X's four rotors.
 pub const ROTOR_GAINS: usize = 4;
-
-/// Index in [`TModel::tensors`] of the W head's input-layer weight (J⁻¹ and g heads take 6 each).
-const FEATURE_INPUT_WEIGHT: usize = 12;
-/// `w` with g's body x and y force rows set to zero (the g head's output weights and biases of
-/// those rows), exactly zero at every attitude: no input of a quadrotor makes a body x or y
-/// force ([`TrainConfig::zero_unactuated_gain_rows`]).
-pub fn with_unactuated_gain_rows_zeroed(w: &ModelWeights) -> ModelWeights {
-    let mut out = *w;
-    let l2 = &mut out.gain.l2;
-    for (row, bias) in l2.weight.iter_mut().zip(l2.bias.iter_mut()).take(8) {
-        row.iter_mut().for_each(|v| *v = 0.0);
-        *bias = 0.0;
-    }
-    out
-}
 
 /// The learning rate of main-stage epoch `epoch` (1-based) of `epochs`: a linear warm-up over
 /// `warmup` epochs to `lr`, then a cosine decay to lr / 20 at the last epoch.
@@ -289,33 +94,6 @@ struct Trainer<'a> {
     fused: bool,
     /// Set once the fused kernel has declined a shape and burn stood in (warned once).
     fused_declined: AtomicBool,
-}
-
-/// The physical prior training starts from: the described vehicle's inertia (`import
-/// --vehicle`), else the CF2X's.
-fn prior_of(data: &Windows) -> ModelWeights {
-    data.vehicle
-        .description
-        .as_ref()
-        .map_or_else(ModelWeights::prior, |v| {
-            ModelWeights::prior_with_inertia(&nalgebra::Vector3::from(
-                v.inertia_kg_m2.map(|x| x as f32),
-            ))
-        })
-}
-
-/// Number of leading [`TModel::tensors`] that make the J⁻¹ and g heads (six each).
-const RIGID_BODY_TENSORS: usize = 12;
-
-/// `w` with J⁻¹ and g set to `prior`'s ([`TrainConfig::pin_rigid_body`]): the described
-/// inertia and the true mixer at every attitude. Training then freezes both heads, so the
-/// blob carries them unchanged.
-fn with_rigid_body_pinned(w: &ModelWeights, prior: &ModelWeights) -> ModelWeights {
-    ModelWeights {
-        inertia: prior.inertia,
-        gain: prior.gain,
-        ..*w
-    }
 }
 
 impl Trainer<'_> {
@@ -467,10 +245,6 @@ type Shard = (f64, Vec<Option<Tensor<2>>>);
 /// The smallest minibatch [`Trainer::loss_and_grads`] splits over the cores (64 windows a
 /// shard on 2 cores).
 const SHARD_MIN_BATCH: usize = 128;
-
-/// The largest minibatch [`batch_loss`] runs the heads fused for (measured with
-/// `host-train bench-train`: fused is faster at 128 and 256, slower at 7,776).
-const FUSE_MAX_BATCH: usize = 1024;
 
 impl<'a> Trainer<'a> {
     fn new(cfg: &'a TrainConfig, data: &'a Windows, device: &Device) -> Self {
