@@ -13,7 +13,8 @@
 
 use super::adam::Adam;
 use super::data::{self, Batch, StateBatch, Windows};
-use super::tensor_model::{to_vec, window_loss, TMlp};
+use super::loss::window_loss;
+use super::tensor_model::{to_vec, TMlp};
 use super::TrainConfig;
 use anyhow::Result;
 use burn::tensor::{Device, Tensor, TensorData};

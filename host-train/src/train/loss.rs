@@ -4,7 +4,7 @@
 
 use super::data::{self, Batch, StateBatch, Windows};
 use super::tensor_model::{
-    rk4_with, to_phase_with, to_vec, velocities_with, window_loss, Consts, Forcing, FusedHeads,
+    mat_mat_t, rk4_with, to_phase_with, to_vec, velocities_with, Consts, Forcing, FusedHeads,
     TModel,
 };
 use burn::tensor::Tensor;
@@ -119,4 +119,47 @@ pub fn eval_loss(
         sum += f64::from(to_vec(&l)[0]) * chunk.len() as f64;
     }
     sum / ids.len() as f64
+}
+
+/// The TSE(3) loss of a predicted window (paper Sec. 3): Σₙ ℓ_p + ℓ_R + `vel_weight`·ℓ_v + ℓ_ω
+/// per window over the predicted states x₁..x_N against `b`'s, then the mean over the batch.
+pub fn window_loss(
+    preds: impl IntoIterator<Item = StateBatch>,
+    b: &Batch,
+    vel_weight: f32,
+) -> Tensor<1> {
+    let mut total: Option<Tensor<2>> = None;
+    for (x, target) in preds.into_iter().zip(b.states.iter().skip(1)) {
+        let lp = (x.p - target.p.clone()).square().sum_dim(1);
+        let lr = rotation_loss(x.rot, target.rot.clone());
+        let lz = (x.v - target.v.clone())
+            .square()
+            .sum_dim(1)
+            .mul_scalar(vel_weight)
+            + (x.w - target.w.clone()).square().sum_dim(1);
+        let l = lp + lr + lz;
+        total = Some(match total {
+            Some(t) => t + l,
+            None => l,
+        });
+    }
+    total
+        .unwrap_or_else(|| Tensor::zeros([1, 1], &b.realization.device()))
+        .mean()
+}
+
+/// ‖log(R̄ Rᵀ)^∨‖² per window [B,1], from sin²θ = ‖vee(E)‖² by the series
+/// θ² = s + s²/3 + 8 s³/45 (s = sin²θ), exact to O(θ⁸) and smooth at θ = 0, where acos is not;
+/// prediction errors over a 5-state window are far below the quarter turn where it would matter.
+pub fn rotation_loss(r_pred: Tensor<3>, r_true: Tensor<3>) -> Tensor<2> {
+    let b = r_pred.dims()[0];
+    let e = mat_mat_t(r_pred, r_true);
+    let skew = (e.clone() - e.swap_dims(1, 2))
+        .mul_scalar(0.5)
+        .reshape([b, 9]);
+    // ‖vee‖² = ½ Σ skew² (each component appears twice).
+    let s = skew.square().sum_dim(1).mul_scalar(0.5);
+    s.clone()
+        + s.clone().square().div_scalar(3.0)
+        + s.clone().square().mul(s).mul_scalar(8.0 / 45.0)
 }

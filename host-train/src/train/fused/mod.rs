@@ -1,6 +1,6 @@
 //! The training loss and its exact gradient as one hand-fused CPU kernel in plain f32, without
 //! burn: [`super::tensor_model`]'s equations (paper eq. 1 and 2 in (q, 𝔭), RK4, the TSE(3) loss of
-//! [`super::tensor_model::window_loss`]) for a minibatch of windows, with the reverse pass (adjoints)
+//! [`super::loss::window_loss`]) for a minibatch of windows, with the reverse pass (adjoints)
 //! written out, the second-order term through the J⁻¹ head's VJP (∂H/∂R) included.
 //!
 //! Eight windows run in lockstep, one per lane of [`V`] (an `[f32; 8]` whose element-wise ops
