@@ -10,7 +10,7 @@
 //! - the firmware's library: `cargo build -p hamflight-bitcraze --profile bitcraze --target
 //!   thumbv7em-none-eabihf` (the app's `Makefile` does this);
 //! - the host: an rlib with the C shim, our stand-in Bitcraze headers (`host-include/`) and
-//!   their harness compiled in, for the tests in `host-train/tests/bitcraze_oot.rs`.
+//!   their harness compiled in, for the tests in `host-train/tests/bitcraze_oot/`.
 //!
 //! Every exported function is allocation-free and panic-free and checks its pointers for NULL.
 //! On the target a panic (there is no reachable one) executes an undefined instruction, so the

@@ -38,6 +38,7 @@ pub mod epochs;
 pub mod export;
 pub mod fused;
 pub mod init;
+pub mod lm;
 pub mod loss;
 pub mod port_fit;
 pub mod predict;

@@ -42,10 +42,17 @@ use crate::sim::plant::{WindSine, WindStep};
 use crate::sim::scenario::{DisturbanceSpec, Scenario, Trajectory};
 use crate::train::{self, TrainConfig};
 
+mod plan;
+mod table;
+
+pub use plan::{flight_plan, PlannedFlight};
+pub use table::table;
+
 /// The calm spiral on the heavy vehicle (built in, so the study runs from any directory).
-pub const CALM_SPIRAL_TOML: &str = include_str!("../../../scenarios/mismatch-calm-spiral.toml");
+pub const CALM_SPIRAL_TOML: &str = include_str!("../../../../scenarios/mismatch-calm-spiral.toml");
 /// paper-spiral on the heavy vehicle.
-pub const PAPER_SPIRAL_TOML: &str = include_str!("../../../scenarios/mismatch-paper-spiral.toml");
+pub const PAPER_SPIRAL_TOML: &str =
+    include_str!("../../../../scenarios/mismatch-paper-spiral.toml");
 
 /// A built-in study vehicle: its name and its three scenarios (name, TOML): the calm spiral
 /// (whose `[vehicle]` and `[effects]` the logged flights use), the windy spiral, the rotor loss.
@@ -69,7 +76,7 @@ pub static VEHICLES: [StudyVehicle; 3] = [
             ("mismatch-paper-spiral", PAPER_SPIRAL_TOML),
             (
                 "mismatch-rotor-loss",
-                include_str!("../../../scenarios/mismatch-rotor-loss.toml"),
+                include_str!("../../../../scenarios/mismatch-rotor-loss.toml"),
             ),
         ],
     },
@@ -79,15 +86,15 @@ pub static VEHICLES: [StudyVehicle; 3] = [
         scenarios: [
             (
                 "light-calm-spiral",
-                include_str!("../../../scenarios/light-calm-spiral.toml"),
+                include_str!("../../../../scenarios/light-calm-spiral.toml"),
             ),
             (
                 "light-windy-spiral",
-                include_str!("../../../scenarios/light-windy-spiral.toml"),
+                include_str!("../../../../scenarios/light-windy-spiral.toml"),
             ),
             (
                 "light-rotor-loss",
-                include_str!("../../../scenarios/light-rotor-loss.toml"),
+                include_str!("../../../../scenarios/light-rotor-loss.toml"),
             ),
         ],
     },
@@ -97,15 +104,15 @@ pub static VEHICLES: [StudyVehicle; 3] = [
         scenarios: [
             (
                 "asym-calm-spiral",
-                include_str!("../../../scenarios/asym-calm-spiral.toml"),
+                include_str!("../../../../scenarios/asym-calm-spiral.toml"),
             ),
             (
                 "asym-windy-spiral",
-                include_str!("../../../scenarios/asym-windy-spiral.toml"),
+                include_str!("../../../../scenarios/asym-windy-spiral.toml"),
             ),
             (
                 "asym-rotor-loss",
-                include_str!("../../../scenarios/asym-rotor-loss.toml"),
+                include_str!("../../../../scenarios/asym-rotor-loss.toml"),
             ),
         ],
     },
@@ -213,120 +220,6 @@ impl VehicleStudyArgs {
             quiet: true,
         }
     }
-}
-
-/// One logged training flight: a trajectory and a disturbance on the study's vehicle.
-#[derive(Clone, Debug)]
-pub struct PlannedFlight {
-    /// Short name (the log's file stem).
-    pub name: &'static str,
-    /// The path.
-    pub trajectory: Trajectory,
-    /// The disturbance (none for the calm flights).
-    pub disturbance: DisturbanceSpec,
-    /// Flown in calm air: imported with `--calm` (a_j = 0).
-    pub calm: bool,
-    /// Desired yaw rate (rad/s): excites the yaw axis, so that J_z is identifiable.
-    pub yaw_rate_rad_s: f64,
-}
-
-fn wind(w: [f64; 3]) -> DisturbanceSpec {
-    DisturbanceSpec {
-        wind_m_s2: w,
-        ..DisturbanceSpec::default()
-    }
-}
-
-/// The logged flights: hover, circles and spirals, calm and under wind (see the module docs).
-pub fn flight_plan() -> Vec<PlannedFlight> {
-    let hover = |z: f64| Trajectory::Hover {
-        position_m: [0.0, 0.0, z],
-    };
-    let circle = |r: f64, period: f64| Trajectory::Circle {
-        center_m: [0.0, 0.0, 0.8],
-        radius_m: r,
-        period_s: period,
-    };
-    let spiral = |r: f64, period: f64, climb: f64| Trajectory::Spiral {
-        center_m: [0.0, 0.0, 0.5],
-        radius_m: r,
-        period_s: period,
-        climb_m_s: climb,
-    };
-    vec![
-        PlannedFlight {
-            name: "hover-calm",
-            trajectory: hover(1.0),
-            disturbance: DisturbanceSpec::default(),
-            calm: true,
-            yaw_rate_rad_s: 0.8,
-        },
-        PlannedFlight {
-            name: "circle-calm",
-            trajectory: circle(0.6, 6.0),
-            disturbance: DisturbanceSpec::default(),
-            calm: true,
-            yaw_rate_rad_s: 0.0,
-        },
-        PlannedFlight {
-            name: "spiral-calm",
-            trajectory: spiral(0.4, 5.0, 0.04),
-            disturbance: DisturbanceSpec::default(),
-            calm: true,
-            yaw_rate_rad_s: -0.4,
-        },
-        PlannedFlight {
-            name: "hover-wind",
-            trajectory: hover(0.8),
-            disturbance: wind([0.5, -0.4, 0.0]),
-            calm: false,
-            yaw_rate_rad_s: -0.6,
-        },
-        PlannedFlight {
-            name: "circle-wind",
-            trajectory: circle(0.5, 8.0),
-            disturbance: wind([-0.6, 0.3, 0.0]),
-            calm: false,
-            yaw_rate_rad_s: 0.5,
-        },
-        PlannedFlight {
-            name: "spiral-wind",
-            trajectory: spiral(0.5, 7.0, 0.03),
-            disturbance: wind([0.4, 0.6, 0.0]),
-            calm: false,
-            yaw_rate_rad_s: 0.0,
-        },
-        PlannedFlight {
-            name: "circle-gust",
-            trajectory: circle(0.4, 5.0),
-            disturbance: DisturbanceSpec {
-                wind_sines: vec![WindSine {
-                    amplitude_m_s2: [0.4, 0.0, 0.0],
-                    frequency_hz: 0.3,
-                    phase_rad: 0.0,
-                }],
-                wind_steps: vec![WindStep {
-                    wind_m_s2: [0.0, 0.5, 0.0],
-                    from_s: 3.0,
-                    until_s: None,
-                }],
-                ..DisturbanceSpec::default()
-            },
-            calm: false,
-            yaw_rate_rad_s: 0.3,
-        },
-        PlannedFlight {
-            name: "spiral-weak-rotor",
-            trajectory: spiral(0.5, 6.0, 0.02),
-            disturbance: DisturbanceSpec {
-                wind_m_s2: [-0.3, -0.5, 0.0],
-                rotor_efficiency: [0.9, 1.0, 1.0, 1.0],
-                ..DisturbanceSpec::default()
-            },
-            calm: false,
-            yaw_rate_rad_s: 0.0,
-        },
-    ]
 }
 
 /// One controller on one scenario, with the seed of its blob (learned ones).
@@ -635,91 +528,4 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     write_json_atomic(&args.out.join("report.json"), &report)?;
     write_atomic(&args.out.join("table.md"), table(&report).as_bytes())?;
     Ok(report)
-}
-
-fn cm(f: &Flown) -> String {
-    match (f.crashed, f.rmse_m) {
-        (true, _) => format!("crash {:.1} s", f.crash_time_s.unwrap_or(f64::NAN)),
-        (false, Some(r)) => format!("{:.3}", r * 100.0),
-        (false, None) => "–".into(),
-    }
-}
-
-/// The markdown table: position RMSE (cm, t ≥ 5 s) per controller and scenario (learned ones
-/// per seed), then the held-out N-step errors and the learned J per seed.
-pub fn table(r: &StudyReport) -> String {
-    let mut s = String::from("| controller |");
-    for sc in &r.scenarios {
-        s += &format!(" {sc} (cm) |");
-    }
-    s += "\n| --- |";
-    s += &" --- |".repeat(r.scenarios.len());
-    s += "\n";
-    for (key, desc) in STUDY_CONTROLLERS {
-        let cell = |sc: &str| {
-            r.results(key, sc)
-                .into_iter()
-                .map(cm)
-                .collect::<Vec<_>>()
-                .join(" / ")
-        };
-        let Some(first) = r.scenarios.first() else {
-            break;
-        };
-        let seeds: Vec<String> = r
-            .results(key, first)
-            .iter()
-            .filter_map(|f| f.seed)
-            .map(|k| k.to_string())
-            .collect();
-        if seeds.is_empty() && key.ends_with("-no-lag") {
-            continue;
-        }
-        let label = if seeds.is_empty() {
-            desc.to_string()
-        } else {
-            format!("{desc}, seed {}", seeds.join(" / "))
-        };
-        s += &format!("| {label} |");
-        for sc in &r.scenarios {
-            s += &format!(" {} |", cell(sc));
-        }
-        s += "\n";
-    }
-    s += "\n| seed | command | windows (train / held out) | held-out last-step error, rate (rad/s): learned / nominal stock / nominal true | velocity (m/s): learned / nominal stock / nominal true | learned diag J (1e-5 kg·m²) | learned thrust gain |\n| --- | --- | --- | --- | --- | --- | --- |\n";
-    for sd in &r.seeds {
-        let t = sd.heldout_nominal_true.unwrap_or([f64::NAN; 4]);
-        s += &format!(
-            "| {} | {} | {} / {} | {:.3} / {:.3} / {:.3} | {:.2e} / {:.2e} / {:.2e} | {:.2}, {:.2}, {:.2} | {:.3} |\n",
-            sd.seed,
-            if sd.motor_lag_filter {
-                "realized (τ)"
-            } else {
-                "commanded"
-            },
-            sd.train_windows,
-            sd.heldout_windows,
-            sd.heldout_learned[3],
-            sd.heldout_nominal_stock[3],
-            t[3],
-            sd.heldout_learned[2],
-            sd.heldout_nominal_stock[2],
-            t[2],
-            sd.learned_inertia_diag_kg_m2[0] * 1e5,
-            sd.learned_inertia_diag_kg_m2[1] * 1e5,
-            sd.learned_inertia_diag_kg_m2[2] * 1e5,
-            sd.learned_thrust_gain,
-        );
-    }
-    let j = r.vehicle.inertia_kg_m2;
-    s += &format!(
-        "\nTrue vehicle: {} kg, diag J {:.2}, {:.2}, {:.2} e-5 kg·m², rotor efficiencies {:?}, motor τ {} s.\n",
-        r.vehicle.mass_kg,
-        j[0] * 1e5,
-        j[1] * 1e5,
-        j[2] * 1e5,
-        r.vehicle.rotor_efficiency,
-        r.motor_tau_s
-    );
-    s
 }
