@@ -330,10 +330,24 @@ pub struct PredictionInput<'a> {
     pub measurement: &'a Measurement,
     /// [`Adaptation::feature_normalization`] of `features`: the process noise Q is scaled by it.
     pub feature_scale: f32,
-    /// The model's port terms, if not the identity: the prediction then takes the input's
-    /// gain, the dissipation, the gyrator and the learned potential out of the measured
-    /// momentum rate as well.
-    pub port: Option<&'a crate::model::PortTerms>,
+    /// The model's port terms at this tick, if not the identity: the prediction then takes the
+    /// input's gain, the dissipation, the gyrator and the learned potential out of the
+    /// measured momentum rate as well.
+    pub port: Option<&'a PortPrediction>,
+}
+
+/// What the model's port terms ([`crate::model::PortTerms`]) add to the composite prediction's
+/// known momentum rate (docs/math.md "Dissipation, potential and actuator lag"): the input's
+/// effective gain k (the prediction's g u becomes g (k ∘ u)) and the port wrench at the state.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct PortPrediction {
+    /// k = [`crate::model::PortTerms::input_gain`].
+    pub input_gain: Vector4<f32>,
+    /// The port force at the state (N, body): [`crate::model::PortTerms::force`] at v, ω.
+    pub force_n: Vector3<f32>,
+    /// The port torque at the state (N·m, body): [`crate::model::PortTerms::torque`] at
+    /// Rᵀe₃, v, ω.
+    pub torque_nm: Vector3<f32>,
 }
 
 /// The composite law's memory between ticks.
@@ -470,8 +484,8 @@ impl Adaptation {
         };
         let k = if rates.normalized { scale } else { 1.0 };
         let (lin, ang) = (lin * k, ang * (k * torque_share));
-        let s = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
-        features.transpose() * s
+        let s = [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
+        SVector::from(crate::fpu::transpose_mul(&features.data.0, &s))
     }
 
     /// The normalized gradient's factor min(1, h p / ‖W̃‖²_F) ([`AdaptationRates::normalized`]):
@@ -482,11 +496,7 @@ impl Adaptation {
     pub fn feature_normalization(features: &SMatrix<f32, 6, FEATURES>, mass_kg: f32) -> f32 {
         // One pass over the columns (column-major storage: rows 0–2 of a column are force,
         // 3–5 torque).
-        let (mut force, mut torque) = (0.0f32, 0.0f32);
-        for &[f0, f1, f2, t0, t1, t2] in &features.data.0 {
-            force += f0 * f0 + f1 * f1 + f2 * f2;
-            torque += t0 * t0 + t1 * t1 + t2 * t2;
-        }
+        let (force, torque) = crate::fpu::sum_squares_split(&features.data.0);
         const INV_TAU2: f32 = 1.0 / (NOMINAL_TORQUE_FEATURE_NM * NOMINAL_TORQUE_FEATURE_NM);
         normalization(
             force / (mass_kg * mass_kg) + torque * INV_TAU2,
@@ -576,7 +586,11 @@ impl Adaptation {
             u
         };
         self.pred.has_lag = true;
-        let gu = x.gain * u;
+        // With port terms the input acts through its effective gain: g (k ∘ u).
+        let gu = match x.port {
+            Some(port) => x.gain * u.component_mul(&port.input_gain),
+            None => x.gain * u,
+        };
         let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
         let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
@@ -592,27 +606,18 @@ impl Adaptation {
         let mut d_w = x.inertia * ((w - prev_w) * (1.0 / dt_s)) - jw.cross(&w) - gu_w;
         let mut d_v = d_v;
         if let Some(port) = x.port {
-            // The port terms' share of the known momentum rate, out of line.
-            let up = Vector3::new(x.rot.m31, x.rot.m32, x.rot.m33);
-            let (dv, dw) = port_correction(port, x.gain, &up, &u, &v, &w);
-            d_v -= dv;
-            d_w -= dw;
+            // The port wrench's share of the known momentum rate.
+            d_v -= port.force_n;
+            d_w -= port.torque_nm;
         }
-        // Scale the rows to a's units.
-        let (sf, st) = (1.0 / m, 1.0 / TORQUE_UNIT_NM);
-        let z = [
-            d_v.x * sf,
-            d_v.y * sf,
-            d_v.z * sf,
-            d_w.x * st,
-            d_w.y * st,
-            d_w.z * st,
-        ];
-        // The same first-order low-pass on both sides, the feature rows scaled as z's in the
-        // same pass: h_f ← h_f + (s W − h_f) α. The first sample has α = 1 on zeroed filters,
-        // which gives h_f = s W exactly. A non-finite feature shows as a non-finite sᵢ in the
-        // Kalman update, a non-finite z as a non-finite a after it: either drops the update and
-        // zeroes the filters for a fresh start.
+        // The same first-order low-pass on both sides, the rows scaled to a's units (force
+        // rows / m → m/s², torque rows / 1e-3 N·m) in the same pass: with g = s α and
+        // β = 1 − α, h_f ← fma(W, g, h_f β) (h_f + (s W − h_f) α), z_f likewise from d, and the
+        // prediction error ε = z_f − h_f a with the estimate before this tick's update (the
+        // sequence `fpu::kalman_rows` uses for its innovations, so row 0's is this ε₀). The
+        // first sample has α = 1 on zeroed filters, which gives h_f = s W. A non-finite
+        // feature shows as a non-finite sᵢ in the Kalman update, a non-finite z as a non-finite
+        // a after it: either drops the update and zeroes the filters for a fresh start.
         let (alpha_f, alpha_t) = if self.pred.has_filter {
             (
                 lag_gain(gains.filter_tau_s, dt_s),
@@ -621,24 +626,21 @@ impl Adaptation {
         } else {
             (1.0, 1.0)
         };
-        // Force rows (0–2) with the force rows' low-pass, torque rows (3–5) with theirs.
-        let (h_force, h_torque) = self.pred.h_f.split_at_mut(3);
-        let (z_force, z_torque) = self.pred.z_f.split_at_mut(3);
-        let (zi_force, zi_torque) = z.split_at(3);
-        for (row0, hs, zs, zis, sc, alpha) in [
-            (0, h_force, z_force, zi_force, sf, alpha_f),
-            (3, h_torque, z_torque, zi_torque, st, alpha_t),
-        ] {
-            for (r, (hr, (zf, zi))) in hs.iter_mut().zip(zs.iter_mut().zip(zis)).enumerate() {
-                for (c, h) in hr.iter_mut().enumerate() {
-                    let target = x.features.get((row0 + r, c)).copied().unwrap_or(0.0) * sc;
-                    *h += (target - *h) * alpha;
-                }
-                *zf += (zi - *zf) * alpha;
-            }
-        }
+        let (sf, st) = (1.0 / m, 1.0 / TORQUE_UNIT_NM);
+        let coef = [sf * alpha_f, 1.0 - alpha_f, st * alpha_t, 1.0 - alpha_t];
+        let d = [d_v.x, d_v.y, d_v.z, d_w.x, d_w.y, d_w.z];
+        let mut eps = [0.0f32; 6];
+        crate::fpu::filter_rows(
+            &x.features.data.0,
+            &mut self.pred.h_f,
+            &mut self.pred.z_f,
+            &d,
+            &self.a.data.0[0],
+            &coef,
+            &mut eps,
+        );
         self.pred.has_filter = true;
-        let out = self.kalman(gains, a_max, (dt_s, dt_s * x.feature_scale));
+        let out = self.kalman(gains, a_max, (dt_s, dt_s * x.feature_scale), eps);
         if out.is_none() {
             // A non-finite feature reached the filter: start it again at the next sample.
             self.pred.has_filter = false;
@@ -654,6 +656,7 @@ impl Adaptation {
         g: &CompositeGains,
         a_max: f32,
         (dt_s, q_dt_s): (f32, f32),
+        eps: [f32; 6],
     ) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a 6×6 matrix, updated in place (no copy of its 36 entries in
         // and out); the updates below read and write its upper triangle only (the lower one is
@@ -689,15 +692,8 @@ impl Adaptation {
         let rows = &self.pred.h_f;
         let zf = &self.pred.z_f;
         let a0: [f32; FEATURES] = self.a.data.0[0];
-        // The prediction error with the estimate before this tick's update (the sequence
-        // `fpu::kalman_rows` uses for its innovations, so row 0's is this ε₀).
-        let mut eps = [0.0f32; 6];
-        for ((e, h), z) in eps.iter_mut().zip(rows.iter()).zip(zf.iter()) {
-            *e = h
-                .iter()
-                .zip(a0.iter())
-                .fold(*z, |acc, (hj, aj)| acc - hj * aj);
-        }
+        // `eps`: the prediction error with the estimate before this tick's update
+        // (`fpu::filter_rows`).
         // Change detection on the torque rows: restart their block of P.
         let [_, _, _, e3, e4, e5] = eps;
         let e2 = e3 * e3 + e4 * e4 + e5 * e5;
@@ -808,35 +804,6 @@ impl Adaptation {
     pub fn prediction_error(&self) -> Option<Vector6<f32>> {
         self.pred.eps.map(Vector6::from)
     }
-}
-
-/// What the port terms add to the composite prediction's known momentum rate, force then
-/// torque (body frame): the input's gain, g((k − 1) ∘ u), and the port wrench at the state
-/// (docs/math.md "Dissipation, potential and actuator lag"). Out of line: a rigid-body model's
-/// step never runs it.
-#[cfg(feature = "composite")]
-#[inline(never)]
-fn port_correction(
-    port: &crate::model::PortTerms,
-    gain: &SMatrix<f32, 6, 4>,
-    up: &Vector3<f32>,
-    u: &Vector4<f32>,
-    v: &Vector3<f32>,
-    w: &Vector3<f32>,
-) -> (Vector3<f32>, Vector3<f32>) {
-    let (f, t) = port.wrench(up, v, w);
-    let k = port.input_gain();
-    let du = gain
-        * Vector4::new(
-            u.x * (k.x - 1.0),
-            u.y * (k.y - 1.0),
-            u.z * (k.z - 1.0),
-            u.w * (k.w - 1.0),
-        );
-    (
-        f + Vector3::new(du[0], du[1], du[2]),
-        t + Vector3::new(du[3], du[4], du[5]),
-    )
 }
 
 /// dt / (τ + dt): the step gain of a first-order lag τ (s); 1 (no lag) for τ ≤ 0 or NaN.

@@ -15,11 +15,11 @@
 //! torques): for the true g it is exactly the pseudo-inverse, and for a learned g it keeps model
 //! error in the unactuated rows from leaking into the torques.
 
-#[cfg(feature = "composite")]
-use crate::adapt::PredictionInput;
 use crate::adapt::{
     Adaptation, AdaptationLaw, AdaptationRates, CompositeGains, Measurement, TrackingError,
 };
+#[cfg(feature = "composite")]
+use crate::adapt::{PortPrediction, PredictionInput};
 use crate::mixer::{Airframe, RotorCommand, Saturation, Wrench};
 use crate::model::{HamiltonianModel, ModelTerms, State, DEFAULT_MOTOR_TAU_S, FEATURES, MASS_KG};
 use crate::reference::{desired_attitude, Setpoint, TiltLimit};
@@ -680,7 +680,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             return;
         }
         if self.gains.adapt {
-            self.adapt(state, meas, &inertia, errors, &act, dt_s);
+            self.adapt(state, meas, &inertia, &demand, &act, dt_s);
         }
         *out = Output {
             rotors: act.rotors,
@@ -716,6 +716,8 @@ impl<M: HamiltonianModel> FlightController<M> {
         let wa = t.features * self.adaptation.a;
         let wa_v = Vector3::new(wa.x, wa.y, wa.z);
         let wa_w = Vector3::new(wa.w, wa.a, wa.b);
+        #[cfg(feature = "composite")]
+        let mut port_pred = PortPrediction::default();
 
         // Translational law: b_v (body frame).
         let e_p = rt * (state.p_m - sp.p_m);
@@ -729,7 +731,19 @@ impl<M: HamiltonianModel> FlightController<M> {
         // lag"): the law cancels the drag, the gyrator and the learned potential at the
         // reference velocity, so what is left acts on the errors alone and is passive.
         if self.port_active {
-            b_v -= self.model.port().force(&v_ref, w);
+            // With the composite law, the port force at the state for its prediction too.
+            #[cfg(feature = "composite")]
+            {
+                let port = self.model.port();
+                let (f_law, f_pred) = port.force_pair(&v_ref, &state.v_body_m_s, w);
+                port_pred.input_gain = port.input_gain();
+                port_pred.force_n = f_pred;
+                b_v -= f_law;
+            }
+            #[cfg(not(feature = "composite"))]
+            {
+                b_v -= self.model.port().force(&v_ref, w);
+            }
         }
 
         // Desired attitude from the force the law wants. Its rate Ḟ ≈ m p⃛*, and with the
@@ -771,12 +785,28 @@ impl<M: HamiltonianModel> FlightController<M> {
         let mut b_w = w.cross(&p_w) - pd_w + p_dot_des_w - wa_w;
         if self.port_active {
             let b_up = Vector3::new(r.m31, r.m32, r.m33);
-            b_w -= self.model.port().torque(&b_up, &v_ref, &w_des_body);
+            // With the composite law, the port torque at the state for its prediction too.
+            #[cfg(feature = "composite")]
+            {
+                let (t_law, t_pred) = self.model.port().torque_pair(
+                    &b_up,
+                    (&v_ref, &w_des_body),
+                    (&state.v_body_m_s, w),
+                );
+                port_pred.torque_nm = t_pred;
+                b_w -= t_law;
+            }
+            #[cfg(not(feature = "composite"))]
+            {
+                b_w -= self.model.port().torque(&b_up, &v_ref, &w_des_body);
+            }
         }
         Demand {
             b_act: Vector4::new(b_v.z, b_w.x, b_w.y, b_w.z),
             errors: TrackingError { e_p, e_v, e_r, e_w },
             tilt_limited: att.tilt_limited,
+            #[cfg(feature = "composite")]
+            port_pred,
         }
     }
 
@@ -788,14 +818,19 @@ impl<M: HamiltonianModel> FlightController<M> {
         let g = &self.gains;
         let g_act = self.terms.gain.fixed_rows::<4>(2).into_owned();
         let b_act = *b_act;
-        let u = match g_act.try_inverse() {
-            Some(inv) => inv * b_act,
-            None => match (g_act.transpose() * g_act + Matrix4::identity() * 1e-9).try_inverse() {
-                Some(inv) => inv * g_act.transpose() * b_act,
+        let u = match solve_in_order(&g_act, &b_act) {
+            Some(u) => u,
+            None => match g_act.try_inverse() {
+                Some(inv) => inv * b_act,
                 None => {
-                    return Actuation {
-                        singular: true,
-                        ..Actuation::default()
+                    match (g_act.transpose() * g_act + Matrix4::identity() * 1e-9).try_inverse() {
+                        Some(inv) => inv * g_act.transpose() * b_act,
+                        None => {
+                            return Actuation {
+                                singular: true,
+                                ..Actuation::default()
+                            }
+                        }
                     }
                 }
             },
@@ -869,11 +904,12 @@ impl<M: HamiltonianModel> FlightController<M> {
         state: &State,
         meas: &Measurement,
         inertia: &Matrix3<f32>,
-        errors: &TrackingError,
+        demand: &Demand,
         act: &Actuation,
         dt_s: f32,
     ) {
         let t = &self.terms;
+        let errors = &demand.errors;
         #[cfg(not(feature = "composite"))]
         let _ = (state, meas, inertia);
         let g = &self.gains;
@@ -893,7 +929,7 @@ impl<M: HamiltonianModel> FlightController<M> {
                 w_body_rad_s: &state.w_body_rad_s,
                 measurement: meas,
                 feature_scale: scale,
-                port: self.port_active.then_some(self.model.port()),
+                port: self.port_active.then_some(&demand.port_pred),
             };
             self.adaptation
                 .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
@@ -929,6 +965,11 @@ struct Demand {
     b_act: Vector4<f32>,
     errors: TrackingError,
     tilt_limited: bool,
+    /// The port terms at the state for the composite prediction (when the port is active):
+    /// computed beside the law's, handed to [`FlightController::adapt`] (not kept in the
+    /// controller, whose size the Crazyflie app's C ABI fixes).
+    #[cfg(feature = "composite")]
+    port_pred: PortPrediction,
 }
 
 /// What [`FlightController::actuate`] gives the rest of the step.
@@ -973,10 +1014,79 @@ impl<M> FlightController<M> {
     }
 }
 
+/// x with G x = b by Gaussian elimination with the pivots in diagonal order (no row
+/// exchanges), a third of the work of G⁻¹ and then G⁻¹ b. `None` unless every pivot keeps more
+/// than half of its diagonal entry's magnitude (NaN included): g's actuated block is near
+/// diagonal (identity for the true g), and where it is not the caller inverts G instead.
+#[inline(always)]
+fn solve_in_order(g: &Matrix4<f32>, b: &Vector4<f32>) -> Option<Vector4<f32>> {
+    let keeps = |pivot: f32, diag: f32| pivot.abs() > 0.5 * diag.abs();
+    let p1 = g.m11;
+    if !keeps(p1, p1) {
+        return None;
+    }
+    let (l2, l3, l4) = (g.m21 / p1, g.m31 / p1, g.m41 / p1);
+    let (a22, a23, a24) = (g.m22 - l2 * g.m12, g.m23 - l2 * g.m13, g.m24 - l2 * g.m14);
+    let (a32, a33, a34) = (g.m32 - l3 * g.m12, g.m33 - l3 * g.m13, g.m34 - l3 * g.m14);
+    let (a42, a43, a44) = (g.m42 - l4 * g.m12, g.m43 - l4 * g.m13, g.m44 - l4 * g.m14);
+    let (b2, b3, b4) = (b.y - l2 * b.x, b.z - l3 * b.x, b.w - l4 * b.x);
+    if !keeps(a22, g.m22) {
+        return None;
+    }
+    let (l3, l4) = (a32 / a22, a42 / a22);
+    let (a33, a34, b3) = (a33 - l3 * a23, a34 - l3 * a24, b3 - l3 * b2);
+    let (a43, a44, b4) = (a43 - l4 * a23, a44 - l4 * a24, b4 - l4 * b2);
+    if !keeps(a33, g.m33) {
+        return None;
+    }
+    let l4 = a43 / a33;
+    let (a44, b4) = (a44 - l4 * a34, b4 - l4 * b3);
+    if !keeps(a44, g.m44) {
+        return None;
+    }
+    let x4 = b4 / a44;
+    let x3 = (b3 - a34 * x4) / a33;
+    let x2 = (b2 - a23 * x3 - a24 * x4) / a22;
+    let x1 = (b.x - g.m12 * x2 - g.m13 * x3 - g.m14 * x4) / p1;
+    Some(Vector4::new(x1, x2, x3, x4))
+}
+
 fn errors_finite(e: &TrackingError) -> bool {
     crate::fpu::all_finite(
         [e.e_p, e.e_v, e.e_r, e.e_w]
             .iter()
             .flat_map(|v| v.iter().copied()),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The in-order elimination solves a near-diagonal G as the inverse does, and hands a G
+    /// whose pivots collapse (a permutation, a singular or non-finite G) back to the inverse.
+    #[test]
+    fn solve_in_order_matches_the_inverse_or_declines() {
+        let g = Matrix4::new(
+            1.02, 0.03, -0.01, 0.02, //
+            -0.04, 0.97, 0.05, 0.01, //
+            0.02, -0.03, 1.1, -0.06, //
+            0.01, 0.02, 0.04, 0.9,
+        );
+        let b = Vector4::new(0.26, 1e-3, -2e-3, 4e-4);
+        let x = solve_in_order(&g, &b).expect("near diagonal");
+        let want = g.try_inverse().expect("invertible") * b;
+        assert!((x - want).norm() <= 1e-6 * want.norm(), "{x} vs {want}");
+        let perm = Matrix4::new(
+            0.0, 1.0, 0.0, 0.0, //
+            1.0, 0.0, 0.0, 0.0, //
+            0.0, 0.0, 1.0, 0.0, //
+            0.0, 0.0, 0.0, 1.0,
+        );
+        assert_eq!(solve_in_order(&perm, &b), None);
+        assert_eq!(solve_in_order(&Matrix4::zeros(), &b), None);
+        let mut nan = g;
+        nan.m33 = f32::NAN;
+        assert_eq!(solve_in_order(&nan, &b), None);
+    }
 }

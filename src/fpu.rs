@@ -300,7 +300,7 @@ mod m4f {
 
     /// The composite law's six scalar Kalman updates ([`super::kalman_rows`]'s sequence).
     /// Registers: h (then k) s0–s5, z s6, r s7, a s8–s13, P hᵀ s14–s19, s s20, e and ν s21,
-    /// 1/s s22, a product s23, a column of P s24–s29.
+    /// 1/s s22, a column of P s24–s29.
     ///
     /// # Safety
     /// `p` points at 36 readable and writable f32 (column-major 6×6), `a` at 6, `h` at 36
@@ -379,20 +379,14 @@ mod m4f {
                 "ble 3f",
                 "vmov.f32 s22, #1.0",
                 "vdiv.f32 s22, s22, s20",
-                // e = z − h a (unfused, in index order), ν = e / s, a += ph ν.
+                // e = z − h a (fused, in index order), ν = e / s, a += ph ν.
                 "vmov.f32 s21, s6",
-                "vmul.f32 s23, s0, s8",
-                "vsub.f32 s21, s21, s23",
-                "vmul.f32 s23, s1, s9",
-                "vsub.f32 s21, s21, s23",
-                "vmul.f32 s23, s2, s10",
-                "vsub.f32 s21, s21, s23",
-                "vmul.f32 s23, s3, s11",
-                "vsub.f32 s21, s21, s23",
-                "vmul.f32 s23, s4, s12",
-                "vsub.f32 s21, s21, s23",
-                "vmul.f32 s23, s5, s13",
-                "vsub.f32 s21, s21, s23",
+                "vfms.f32 s21, s0, s8",
+                "vfms.f32 s21, s1, s9",
+                "vfms.f32 s21, s2, s10",
+                "vfms.f32 s21, s3, s11",
+                "vfms.f32 s21, s4, s12",
+                "vfms.f32 s21, s5, s13",
                 "vmul.f32 s21, s21, s22",
                 "vfma.f32 s8, s14, s21",
                 "vfma.f32 s9, s15, s21",
@@ -458,6 +452,195 @@ mod m4f {
                 r = inout(reg) r => _,
                 t = out(reg) _,
                 n = inout(reg) 6usize => _,
+            );
+        }
+    }
+
+    /// [`super::sum_squares_split`]: the 36 features in two loads of three columns, the force
+    /// rows' squares into s18 and the torque rows' into s19, column by column.
+    ///
+    /// # Safety
+    /// `w` points at 36 readable f32 (column-major 6×6).
+    #[inline(always)]
+    pub unsafe fn sum_squares_split(w: *const f32) -> (f32, f32) {
+        let (f, t): (u32, u32);
+        // SAFETY: the caller's contract; s0–s19 are saved on entry and restored on exit.
+        unsafe {
+            asm!(
+                "vpush {{s0-s19}}",
+                "vldmia {w}!, {{s0-s17}}",
+                "vmul.f32 s18, s0, s0",
+                "vmul.f32 s19, s3, s3",
+                "vfma.f32 s18, s1, s1",
+                "vfma.f32 s19, s4, s4",
+                "vfma.f32 s18, s2, s2",
+                "vfma.f32 s19, s5, s5",
+                "vfma.f32 s18, s6, s6",
+                "vfma.f32 s19, s9, s9",
+                "vfma.f32 s18, s7, s7",
+                "vfma.f32 s19, s10, s10",
+                "vfma.f32 s18, s8, s8",
+                "vfma.f32 s19, s11, s11",
+                "vfma.f32 s18, s12, s12",
+                "vfma.f32 s19, s15, s15",
+                "vfma.f32 s18, s13, s13",
+                "vfma.f32 s19, s16, s16",
+                "vfma.f32 s18, s14, s14",
+                "vfma.f32 s19, s17, s17",
+                "vldmia {w}, {{s0-s17}}",
+                "vfma.f32 s18, s0, s0",
+                "vfma.f32 s19, s3, s3",
+                "vfma.f32 s18, s1, s1",
+                "vfma.f32 s19, s4, s4",
+                "vfma.f32 s18, s2, s2",
+                "vfma.f32 s19, s5, s5",
+                "vfma.f32 s18, s6, s6",
+                "vfma.f32 s19, s9, s9",
+                "vfma.f32 s18, s7, s7",
+                "vfma.f32 s19, s10, s10",
+                "vfma.f32 s18, s8, s8",
+                "vfma.f32 s19, s11, s11",
+                "vfma.f32 s18, s12, s12",
+                "vfma.f32 s19, s15, s15",
+                "vfma.f32 s18, s13, s13",
+                "vfma.f32 s19, s16, s16",
+                "vfma.f32 s18, s14, s14",
+                "vfma.f32 s19, s17, s17",
+                "vmov {f}, s18",
+                "vmov {t}, s19",
+                "vpop {{s0-s19}}",
+                w = inout(reg) w => _,
+                f = out(reg) f,
+                t = out(reg) t,
+                options(readonly, preserves_flags),
+            );
+        }
+        (f32::from_bits(f), f32::from_bits(t))
+    }
+
+    /// [`super::transpose_mul`]: s in s0–s5, a column of W in s6–s11 per output (s12), two
+    /// columns a pass.
+    ///
+    /// # Safety
+    /// `w` points at 36 readable f32 (column-major 6×6), `s` at 6 readable, `y` at 6 writable.
+    #[inline(always)]
+    pub unsafe fn transpose_mul(w: *const f32, s: *const f32, y: *mut f32) {
+        // SAFETY: the caller's contract; s0–s18 are saved on entry and restored on exit.
+        unsafe {
+            asm!(
+                "vpush {{s0-s18}}",
+                "vldmia {s}, {{s0-s5}}",
+                "movs {s}, #3",
+                "2:",
+                "vldmia {w}!, {{s6-s11}}",
+                "vmul.f32 s12, s6, s0",
+                "vfma.f32 s12, s7, s1",
+                "vfma.f32 s12, s8, s2",
+                "vfma.f32 s12, s9, s3",
+                "vfma.f32 s12, s10, s4",
+                "vfma.f32 s12, s11, s5",
+                "vldmia {w}!, {{s6-s11}}",
+                "vmul.f32 s13, s6, s0",
+                "vfma.f32 s13, s7, s1",
+                "vfma.f32 s13, s8, s2",
+                "vfma.f32 s13, s9, s3",
+                "vfma.f32 s13, s10, s4",
+                "vfma.f32 s13, s11, s5",
+                "vstmia {y}!, {{s12-s13}}",
+                "subs {s}, {s}, #1",
+                "bne 2b",
+                "vpop {{s0-s18}}",
+                w = inout(reg) w => _,
+                s = inout(reg) s => _,
+                y = inout(reg) y => _,
+            );
+        }
+    }
+
+    /// One row of [`filter_rows`]: h ← fma(W, g, h β) for the row's six features (W's row read
+    /// with a stride of one column, 24 bytes), z_f ← fma(d, g, z_f β), then
+    /// ε = z_f − h₀a₀ − … − h₅a₅ (each − one `vfms`). Registers: a s0–s5, h s6–s11, W s12–s17,
+    /// g s18, β s19, z_f s20, d s21, ε s22.
+    macro_rules! filter_row_asm {
+        () => {
+            concat!(
+                "vldmia {h}, {{s6-s11}}\n",
+                "vldr s12, [{w}]\n",
+                "vldr s13, [{w}, #24]\n",
+                "vldr s14, [{w}, #48]\n",
+                "vldr s15, [{w}, #72]\n",
+                "vldr s16, [{w}, #96]\n",
+                "vldr s17, [{w}, #120]\n",
+                "adds {w}, {w}, #4\n",
+                "vmul.f32 s6, s6, s19\n",
+                "vmul.f32 s7, s7, s19\n",
+                "vmul.f32 s8, s8, s19\n",
+                "vmul.f32 s9, s9, s19\n",
+                "vmul.f32 s10, s10, s19\n",
+                "vmul.f32 s11, s11, s19\n",
+                "vfma.f32 s6, s12, s18\n",
+                "vfma.f32 s7, s13, s18\n",
+                "vfma.f32 s8, s14, s18\n",
+                "vfma.f32 s9, s15, s18\n",
+                "vfma.f32 s10, s16, s18\n",
+                "vfma.f32 s11, s17, s18\n",
+                "vstmia {h}!, {{s6-s11}}\n",
+                "vldr s20, [{z}]\n",
+                "vldmia {d}!, {{s21}}\n",
+                "vmul.f32 s20, s20, s19\n",
+                "vfma.f32 s20, s21, s18\n",
+                "vstmia {z}!, {{s20}}\n",
+                "vmov.f32 s22, s20\n",
+                "vfms.f32 s22, s6, s0\n",
+                "vfms.f32 s22, s7, s1\n",
+                "vfms.f32 s22, s8, s2\n",
+                "vfms.f32 s22, s9, s3\n",
+                "vfms.f32 s22, s10, s4\n",
+                "vfms.f32 s22, s11, s5\n",
+                "vstmia {e}!, {{s22}}\n",
+            )
+        };
+    }
+
+    /// The composite law's low-pass of the scaled features and of the measured force, and its
+    /// prediction error ([`super::filter_rows`]'s sequence): three rows on the force block's
+    /// (g, β), three on the torque block's.
+    ///
+    /// # Safety
+    /// `w` points at 36 readable f32 (column-major 6×6), `h` at 36 readable and writable
+    /// (row-major 6×6), `z` at 6 readable and writable, `d`, `a` at 6 readable, `c` at 4
+    /// readable, `e` at 6 writable.
+    #[inline(always)]
+    pub unsafe fn filter_rows(
+        w: *const f32,
+        h: *mut f32,
+        z: *mut f32,
+        d: *const f32,
+        a: *const f32,
+        c: *const f32,
+        e: *mut f32,
+    ) {
+        // SAFETY: the caller's contract; s0–s22 are saved on entry and restored on exit.
+        unsafe {
+            asm!(
+                "vpush {{s0-s22}}",
+                "vldmia {a}, {{s0-s5}}",
+                "movs {a}, #2",
+                "2:",
+                "vldmia {c}!, {{s18-s19}}",
+                filter_row_asm!(),
+                filter_row_asm!(),
+                filter_row_asm!(),
+                "subs {a}, {a}, #1",
+                "bne 2b",
+                "vpop {{s0-s22}}",
+                w = inout(reg) w => _,
+                h = inout(reg) h => _,
+                z = inout(reg) z => _,
+                d = inout(reg) d => _,
+                a = inout(reg) a => _,
+                c = inout(reg) c => _,
+                e = inout(reg) e => _,
             );
         }
     }
@@ -666,6 +849,107 @@ unsafe fn layer_fma<const I: usize, const O: usize, const ACT: bool>(
     layer_portable::<I, O, ACT>(w, b, x)
 }
 
+/// The squared Frobenius norms of the force rows (0–2) and of the torque rows (3–5) of a
+/// column-major 6×6 `w` (`w[c][r]` is W(r, c)): each one fma chain from zero, column by column,
+/// rows in order. On the M4F two loads and 36 `vfma`s; the same bits everywhere.
+#[inline]
+pub fn sum_squares_split(w: &[[f32; 6]; 6]) -> (f32, f32) {
+    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+    {
+        // SAFETY: `w` covers 36 f32.
+        unsafe { m4f::sum_squares_split(w.as_ptr().cast::<f32>()) }
+    }
+    #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+    {
+        let (mut force, mut torque) = (0.0f32, 0.0f32);
+        for &[f0, f1, f2, t0, t1, t2] in w {
+            for (f, t) in [(f0, t0), (f1, t1), (f2, t2)] {
+                force = fma(f, f, force);
+                torque = fma(t, t, torque);
+            }
+        }
+        (force, torque)
+    }
+}
+
+/// Wᵀ s for a column-major 6×6 `w` (`w[c][r]` is W(r, c)): output c is one fma chain from zero
+/// over the rows in order. On the M4F one load of a column and six `vfma`s per output; the same
+/// bits everywhere.
+#[inline]
+pub fn transpose_mul(w: &[[f32; 6]; 6], s: &[f32; 6]) -> [f32; 6] {
+    let mut y = [0.0f32; 6];
+    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+    {
+        // SAFETY: `w` covers 36 f32, `s` and `y` 6 each.
+        unsafe { m4f::transpose_mul(w.as_ptr().cast::<f32>(), s.as_ptr(), y.as_mut_ptr()) };
+    }
+    #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+    for (yc, col) in y.iter_mut().zip(w.iter()) {
+        *yc = col
+            .iter()
+            .zip(s.iter())
+            .fold(0.0f32, |acc, (x, v)| fma(*x, *v, acc));
+    }
+    y
+}
+
+/// The composite law's filters and prediction error (`adapt.rs`), in one pass over the rows:
+/// for row r of the features `w` (column-major: `w[c][r]` is W(r, c)), with (g, β) =
+/// (`c[0]`, `c[1]`) for the force rows 0–2 and (`c[2]`, `c[3]`) for the torque rows 3–5:
+/// - h[r][c] ← fma(W(r, c), g, h[r][c] β) (the low-pass h + (g/α W − h) α with g = sα,
+///   β = 1 − α, written so that each entry costs a product and one fma);
+/// - z[r] ← fma(d[r], g, z[r] β);
+/// - e[r] = z[r] − h[r][0] a₀ − … − h[r][5] a₅, each − one fma, in index order (the same
+///   sequence as [`kalman_rows`]' innovation, so its row 0's is e[0]).
+///
+/// On the M4F one assembly loop; the same sequence, and so the same bits, everywhere.
+#[inline]
+pub fn filter_rows(
+    w: &[[f32; 6]; 6],
+    h: &mut [[f32; 6]; 6],
+    z: &mut [f32; 6],
+    d: &[f32; 6],
+    a: &[f32; 6],
+    c: &[f32; 4],
+    e: &mut [f32; 6],
+) {
+    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+    {
+        // SAFETY: every pointer covers the array it comes from, with the sizes the kernel needs.
+        unsafe {
+            m4f::filter_rows(
+                w.as_ptr().cast::<f32>(),
+                h.as_mut_ptr().cast::<f32>(),
+                z.as_mut_ptr(),
+                d.as_ptr(),
+                a.as_ptr(),
+                c.as_ptr(),
+                e.as_mut_ptr(),
+            );
+        }
+    }
+    #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+    {
+        let [gf, bf, gt, bt] = *c;
+        let rows = h
+            .iter_mut()
+            .zip(z.iter_mut())
+            .zip(d.iter().zip(e.iter_mut()));
+        for (r, ((hr, zr), (dr, er))) in rows.enumerate() {
+            let (g, b) = if r < 3 { (gf, bf) } else { (gt, bt) };
+            for (hv, col) in hr.iter_mut().zip(w.iter()) {
+                let wv = col.get(r).copied().unwrap_or(0.0);
+                *hv = fma(wv, g, *hv * b);
+            }
+            *zr = fma(*dr, g, *zr * b);
+            *er = hr
+                .iter()
+                .zip(a.iter())
+                .fold(*zr, |acc, (x, y)| fma(-x, *y, acc));
+        }
+    }
+}
+
 /// The composite law's measurement update (`adapt.rs`): the six rows of a diagonal-R
 /// measurement as six scalar Kalman updates in turn, on the upper triangle of a symmetric,
 /// column-major P (`p[c][j]` is P(j, c), j ≤ c; the lower triangle is neither read nor
@@ -674,7 +958,8 @@ unsafe fn layer_fma<const I: usize, const O: usize, const ACT: bool>(
 ///   then for 0 < j < c: ph_j += P(j,c) h_c and ph_c += P(j,c) h_j, then ph_c += P(c,c) h_c
 ///   (every += one fma);
 /// - s = rᵢ + Σ h_j ph_j (fmas in j order), written over rᵢ; no update unless s > 0;
-/// - e = zᵢ − h₀a₀ − h₁a₁ − … (unfused, in order), ν = e · (1/s), a_j ← fma(ph_j, ν, a_j);
+/// - e = zᵢ − h₀a₀ − h₁a₁ − … (each − one fma, in order), ν = e · (1/s),
+///   a_j ← fma(ph_j, ν, a_j);
 /// - k_j = ph_j · (1/s), P(j,c) ← fma(−k_j, ph_c, P(j,c)) for j ≤ c.
 ///
 /// On the M4F one assembly loop (about 130 instructions a row against some 240 for the
@@ -729,7 +1014,10 @@ pub fn kalman_rows(
             continue;
         }
         let inv = 1.0 / s;
-        let e = hi.iter().zip(a.iter()).fold(*zi, |acc, (x, y)| acc - x * y);
+        let e = hi
+            .iter()
+            .zip(a.iter())
+            .fold(*zi, |acc, (x, y)| fma(-x, *y, acc));
         let nu = e * inv;
         for (aj, phj) in a.iter_mut().zip(ph.iter()) {
             *aj = fma(*phj, nu, *aj);
@@ -739,6 +1027,58 @@ pub fn kalman_rows(
             for (v, kj) in col.iter_mut().zip(k.iter()).take(c + 1) {
                 *v = fma(-kj, *phc, *v);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> [[f32; 6]; 6] {
+        core::array::from_fn(|c| core::array::from_fn(|r| 0.1 * (c as f32 + 1.0) - 0.07 * r as f32))
+    }
+
+    /// The kernels' sequences agree with the plain (unfused) formulas to rounding.
+    #[test]
+    fn feature_kernels_match_the_plain_formulas() {
+        let w = sample();
+        let (f, t) = sum_squares_split(&w);
+        let f_ref: f32 = w.iter().flat_map(|c| c[..3].iter()).map(|x| x * x).sum();
+        let t_ref: f32 = w.iter().flat_map(|c| c[3..].iter()).map(|x| x * x).sum();
+        assert!((f - f_ref).abs() <= 1e-5 * f_ref && (t - t_ref).abs() <= 1e-5 * t_ref);
+
+        let s = [0.3, -1.2, 0.5, 2.0, -0.7, 0.1];
+        let y = transpose_mul(&w, &s);
+        for (yc, col) in y.iter().zip(w.iter()) {
+            let want: f32 = col.iter().zip(s.iter()).map(|(a, b)| a * b).sum();
+            assert!((yc - want).abs() <= 1e-5, "{yc} vs {want}");
+        }
+
+        // One filter step against h + (s W − h) α, z_f + (s d − z_f) α and z_f − h a.
+        let (alpha_f, alpha_t, sf, st) = (0.2f32, 0.3f32, 37.0f32, 1000.0f32);
+        let c = [sf * alpha_f, 1.0 - alpha_f, st * alpha_t, 1.0 - alpha_t];
+        let h0: [[f32; 6]; 6] =
+            core::array::from_fn(|r| core::array::from_fn(|k| 0.5 - 0.1 * (r + k) as f32));
+        let z0 = [1.0, -2.0, 0.5, 3.0, -1.0, 0.25];
+        let d = [0.01, 0.02, -0.03, 1e-3, -2e-3, 4e-4];
+        let a = [0.5, -0.25, 1.0, 2.0, -1.5, 0.75];
+        let (mut h, mut z, mut e) = (h0, z0, [0.0f32; 6]);
+        filter_rows(&w, &mut h, &mut z, &d, &a, &c, &mut e);
+        for r in 0..6 {
+            let (al, sc) = if r < 3 { (alpha_f, sf) } else { (alpha_t, st) };
+            let zr = z0[r] + (sc * d[r] - z0[r]) * al;
+            assert!((z[r] - zr).abs() <= 1e-5 * (1.0 + zr.abs()), "z[{r}]");
+            let mut er = z[r];
+            for k in 0..6 {
+                let hr = h0[r][k] + (sc * w[k][r] - h0[r][k]) * al;
+                assert!(
+                    (h[r][k] - hr).abs() <= 1e-5 * (1.0 + hr.abs()),
+                    "h[{r}][{k}]"
+                );
+                er -= h[r][k] * a[k];
+            }
+            assert!((e[r] - er).abs() <= 1e-4 * (1.0 + er.abs()), "e[{r}]");
         }
     }
 }

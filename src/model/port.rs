@@ -148,6 +148,67 @@ impl PortTerms {
         ) + b.cross(&kb)
     }
 
+    /// [`PortTerms::force`] at two linear velocities that share ω: (at `v_a`, at `v_b`), each
+    /// the same bits as its own call; −Bᵀω and the parameters are read once. Out of line: the
+    /// control step calls it for the law (the reference velocity) and the composite
+    /// prediction (the state's) at once.
+    #[inline(never)]
+    pub fn force_pair(
+        &self,
+        v_a: &Vector3<f32>,
+        v_b: &Vector3<f32>,
+        w: &Vector3<f32>,
+    ) -> (Vector3<f32>, Vector3<f32>) {
+        let [[b00, b01, b02], [b10, b11, b12], [b20, b21, b22]] = self.gyrator_nm_s_m;
+        let [dvx, dvy, dvz] = self.drag_n_s_m;
+        let bw = Vector3::new(
+            b00 * w.x + b10 * w.y + b20 * w.z,
+            b01 * w.x + b11 * w.y + b21 * w.z,
+            b02 * w.x + b12 * w.y + b22 * w.z,
+        );
+        (
+            Vector3::new(
+                -dvx * v_a.x - bw.x,
+                -dvy * v_a.y - bw.y,
+                -dvz * v_a.z - bw.z,
+            ),
+            Vector3::new(
+                -dvx * v_b.x - bw.x,
+                -dvy * v_b.y - bw.y,
+                -dvz * v_b.z - bw.z,
+            ),
+        )
+    }
+
+    /// [`PortTerms::torque`] at two velocity pairs that share the world vertical `b`:
+    /// (at (`v_a`, `w_a`), at (`v_b`, `w_b`)), each the same bits as its own call; b × K b and
+    /// the parameters are computed and read once.
+    #[inline(never)]
+    pub fn torque_pair(
+        &self,
+        b: &Vector3<f32>,
+        (v_a, w_a): (&Vector3<f32>, &Vector3<f32>),
+        (v_b, w_b): (&Vector3<f32>, &Vector3<f32>),
+    ) -> (Vector3<f32>, Vector3<f32>) {
+        let [[b00, b01, b02], [b10, b11, b12], [b20, b21, b22]] = self.gyrator_nm_s_m;
+        let [dwx, dwy, dwz] = self.rate_damping_nm_s;
+        let [k11, k22, k33, k12, k13, k23] = self.tilt_stiffness_nm;
+        let kb = Vector3::new(
+            k11 * b.x + k12 * b.y + k13 * b.z,
+            k12 * b.x + k22 * b.y + k23 * b.z,
+            k13 * b.x + k23 * b.y + k33 * b.z,
+        );
+        let pot = b.cross(&kb);
+        let at = |v: &Vector3<f32>, w: &Vector3<f32>| {
+            Vector3::new(
+                -dwx * w.x + (b00 * v.x + b01 * v.y + b02 * v.z),
+                -dwy * w.y + (b10 * v.x + b11 * v.y + b12 * v.z),
+                -dwz * w.z + (b20 * v.x + b21 * v.y + b22 * v.z),
+            ) + pot
+        };
+        (at(v_a, w_a), at(v_b, w_b))
+    }
+
     /// Checks that the terms can be flown: finite, gains in range, lags in range, D ⪰ 0.
     ///
     /// # Errors
@@ -351,6 +412,23 @@ mod tests {
             (power + dissipated).abs() < 1e-5,
             "{power} against {}",
             -dissipated
+        );
+    }
+
+    /// The pairs give the same bits as one call per velocity.
+    #[test]
+    fn pairs_match_single_calls() {
+        let s = sample();
+        let b = Vector3::new(0.1, 0.2, 0.97).normalize();
+        let (va, vb) = (Vector3::new(0.5, -1.2, 0.3), Vector3::new(-0.2, 0.4, 0.9));
+        let (wa, wb) = (Vector3::new(-2.0, 0.7, 1.1), Vector3::new(0.3, -0.6, 0.2));
+        assert_eq!(
+            s.force_pair(&va, &vb, &wa),
+            (s.force(&va, &wa), s.force(&vb, &wa))
+        );
+        assert_eq!(
+            s.torque_pair(&b, (&va, &wa), (&vb, &wb)),
+            (s.torque(&b, &va, &wa), s.torque(&b, &vb, &wb))
         );
     }
 
