@@ -9,6 +9,7 @@ Everything here runs the same compiled f32 Rust code as the firmware and ``host-
 - :class:`Setpoint`: desired position and derivatives (world frame) and yaw;
 - :class:`Blob`: the checked weight-blob codec; a rejected blob raises :class:`BlobError`;
 - :mod:`hamflight.sitl`: the SITL plant and scenario files, flights as numpy arrays;
+- :mod:`hamflight.data`: the scenario files and the default weights shipped in the package;
 - :func:`collect`, :func:`import_logs`, :func:`train`: the data and training commands.
 
 Units are SI and named: positions m (world), R body->world (row-major numpy 3x3), velocities in
@@ -38,7 +39,7 @@ from ._core import (  # noqa: F401
     Setpoint,
     StepResult,
 )
-from . import sitl  # noqa: F401
+from . import data, sitl  # noqa: F401
 
 __version__: str = _core.__version__
 
@@ -56,6 +57,7 @@ __all__ = [
     "CONTROLLER_NAMES",
     "GAIN_KEYWORDS",
     "sitl",
+    "data",
     "collect",
     "import_logs",
     "train",

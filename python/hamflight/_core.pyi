@@ -27,7 +27,9 @@ class Blob:
 
     @staticmethod
     def load(path: Union[str, PathLike]) -> Blob:
-        """Reads and checks a blob file; raises BlobError (or OSError) naming the problem."""
+        """Reads and checks a blob file; raises BlobError (or OSError) naming the problem. A
+        relative ``weights/default.hfw`` that does not exist is the package's copy
+        (:mod:`hamflight.data`)."""
     @staticmethod
     def from_bytes(data: bytes, name: str = "<bytes>") -> Blob: ...
     @staticmethod
@@ -240,7 +242,10 @@ class Scenario:
     """A validated scenario (the TOML files of scenarios/)."""
 
     @staticmethod
-    def load(path: Union[str, PathLike]) -> Scenario: ...
+    def load(path: Union[str, PathLike]) -> Scenario:
+        """Reads and validates a scenario file. A relative ``scenarios/NAME.toml`` (or
+        ``NAME.toml``, ``NAME``) that does not exist is the package's copy
+        (:mod:`hamflight.data`)."""
     @staticmethod
     def from_toml(text: str, name: str = "scenario") -> Scenario: ...
     @staticmethod

@@ -9,6 +9,10 @@ and its TOML scenario files, from Python.
 (:func:`controllers` lists them; the learned ones fly the shipped blob unless ``weights`` is
 given) or a :class:`hamflight.Controller` (a fresh copy of it flies). To vary a scenario, edit
 its dict: ``Scenario.from_dict({**s.to_dict(), "seed": 3})``.
+
+The repository's scenario files are inside the package (:mod:`hamflight.data`): a relative
+``"scenarios/NAME.toml"`` that does not exist from the working directory is read from there, so
+the paths above work outside a checkout.
 """
 
 from __future__ import annotations

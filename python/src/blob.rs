@@ -63,6 +63,7 @@ fn bytes_of(w: &Bound<'_, PyAny>) -> PyResult<(Vec<u8>, String)> {
             w.get_type()
         ))
     })?;
+    let path = crate::packaged_or(w.py(), path, "weights");
     let bytes = std::fs::read(&path).map_err(|e| {
         pyo3::exceptions::PyOSError::new_err(format!(
             "cannot read weight blob `{}`: {e}",
@@ -106,9 +107,11 @@ impl Blob {
 
 #[pymethods]
 impl Blob {
-    /// Reads and checks a blob file (str or os.PathLike).
+    /// Reads and checks a blob file (str or os.PathLike); a relative `weights/default.hfw` that
+    /// is not there is the package's copy (`hamflight.data`).
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let path = crate::packaged_or(py, path, "weights");
         let bytes = std::fs::read(&path).map_err(|e| {
             pyo3::exceptions::PyOSError::new_err(format!(
                 "cannot read weight blob `{}`: {e}",

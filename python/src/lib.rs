@@ -8,7 +8,25 @@ mod blob;
 mod controller;
 mod sitl;
 
+use std::path::PathBuf;
+
 use pyo3::prelude::*;
+
+/// `path` itself, or, when it is relative and does not exist, the package's copy of the
+/// repository file it names (`hamflight.data`): `scenarios/NAME.toml` and `weights/default.hfw`
+/// work outside a checkout. Anything else (or a failed lookup) returns `path` unchanged, so the
+/// caller's error names what was asked for.
+pub fn packaged_or(py: Python<'_>, path: PathBuf, folder: &str) -> PathBuf {
+    if path.is_absolute() || path.exists() {
+        return path;
+    }
+    py.import("hamflight.data")
+        .and_then(|m| m.call_method1("_packaged", (&path, folder)))
+        .and_then(|f| f.extract::<Option<PathBuf>>())
+        .ok()
+        .flatten()
+        .unwrap_or(path)
+}
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -40,9 +40,11 @@ pub struct Scenario {
 
 #[pymethods]
 impl Scenario {
-    /// Reads and validates a scenario file.
+    /// Reads and validates a scenario file; a relative `scenarios/NAME.toml` (or `NAME.toml`,
+    /// `NAME`) that is not there is the package's copy (`hamflight.data`).
     #[staticmethod]
-    fn load(path: PathBuf) -> PyResult<Self> {
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let path = crate::packaged_or(py, path, "scenarios");
         Ok(Self {
             s: HostScenario::load(&path).map_err(err)?,
         })
@@ -122,6 +124,7 @@ fn scenario_arg(obj: &Bound<'_, PyAny>) -> PyResult<HostScenario> {
     let path: PathBuf = obj.extract().map_err(|_| {
         PyTypeError::new_err("scenario: expected a hamflight.sitl.Scenario or a path")
     })?;
+    let path = crate::packaged_or(obj.py(), path, "scenarios");
     HostScenario::load(&path).map_err(err)
 }
 
