@@ -896,11 +896,11 @@ pub fn transpose_mul(w: &[[f32; 6]; 6], s: &[f32; 6]) -> [f32; 6] {
 /// The composite law's filters and prediction error (`adapt.rs`), in one pass over the rows:
 /// for row r of the features `w` (column-major: `w[c][r]` is W(r, c)), with (g, β) =
 /// (`c[0]`, `c[1]`) for the force rows 0–2 and (`c[2]`, `c[3]`) for the torque rows 3–5:
-/// - h[r][c] ← fma(W(r, c), g, h[r][c] β) (the low-pass h + (g/α W − h) α with g = sα,
+/// - `h[r][c] ← fma(W(r, c), g, h[r][c] β)` (the low-pass h + (g/α W − h) α with g = sα,
 ///   β = 1 − α, written so that each entry costs a product and one fma);
-/// - z[r] ← fma(d[r], g, z[r] β);
-/// - e[r] = z[r] − h[r][0] a₀ − … − h[r][5] a₅, each − one fma, in index order (the same
-///   sequence as [`kalman_rows`]' innovation, so its row 0's is e[0]).
+/// - `z[r] ← fma(d[r], g, z[r] β)`;
+/// - `e[r] = z[r] − h[r][0] a₀ − … − h[r][5] a₅`, each − one fma, in index order (the same
+///   sequence as [`kalman_rows`]' innovation, so its row 0's is `e[0]`).
 ///
 /// On the M4F one assembly loop; the same sequence, and so the same bits, everywhere.
 #[inline]
