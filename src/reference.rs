@@ -154,8 +154,9 @@ pub fn desired_attitude(
 /// (sin x, cos x) in f32 arithmetic alone: x is reduced by multiples of π/2 (Cody–Waite, π/2 in
 /// three parts whose products with the quadrant count are exact for |x| < 6,000 rad), then the
 /// Taylor series to r⁹ and r¹⁰ on |r| ≤ π/4 (truncation error below 2·10⁻⁹). Absolute error
-/// ≈ 1e-7 for |x| ≤ 6,000 rad (tested against f64); larger x is first wrapped by the f32 2π;
-/// a NaN or infinite x gives NaN.
+/// ≈ 1e-7 for |x| ≤ 6,000 rad (tested against f64); larger x is first wrapped by whole turns
+/// of the f32 2π (to 0 past 2²⁴ rad, where an f32 angle has no phase left); a NaN or infinite x
+/// gives NaN.
 ///
 /// It replaces `libm`'s `sinf`/`cosf`, whose Payne–Hanek reduction and double-precision kernels
 /// are software f64 on the single-precision M4F: about 300 instructions a call and 9.5 KB of
@@ -165,10 +166,20 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
     const PIO2_HI: f32 = 1.570_312_5;
     const PIO2_MID: f32 = 4.837_513e-4;
     const PIO2_LO: f32 = 7.549_79e-8;
-    // Beyond the exact-reduction range, wrap first (f32 `%` is exact; the error is then that
-    // of 2π in f32, which no f32 angle that large can resolve anyway).
+    // Beyond the exact-reduction range, wrap by whole turns first. No `%`: `fmodf` pulls in
+    // libm's 64-bit integer division, 160 B of stack on the stabilizer task's worst path. The
+    // wrap's error is of the order of one f32 step of x (≤ 1 rad), which no f32 angle that large
+    // resolves anyway; past 2²⁴ rad one step is 2 rad, there is no phase left, and x wraps to 0.
     let x = if x.abs() > 6000.0 {
-        x % core::f32::consts::TAU
+        if x.abs() < 16_777_216.0 {
+            // |x / 2π| < 2^22: the truncation fits an i32 exactly.
+            let turns = (x * (1.0 / core::f32::consts::TAU)) as i32 as f32;
+            x - turns * core::f32::consts::TAU
+        } else if x.is_finite() {
+            0.0
+        } else {
+            x
+        }
     } else {
         x
     };

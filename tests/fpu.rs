@@ -33,6 +33,34 @@ fn sin_cos_matches_f64_within_2e7() {
 }
 
 #[test]
+fn sin_cos_wraps_large_angles_by_whole_f32_turns() {
+    // Past 6,000 rad the angle is wrapped by whole turns of the f32 2π; the reference is the same
+    // wrap done exactly in f64, so the error left is the f32 rounding of the wrap, of the order of
+    // one f32 step of x.
+    let tau = f64::from(core::f32::consts::TAU);
+    let mut rng = SplitMix64(13);
+    for _ in 0..100_000 {
+        let x = rng.symmetric() * 1.6e7;
+        if x.abs() <= 6000.0 {
+            continue;
+        }
+        let (s, c) = sin_cos(x);
+        let wrapped = f64::from(x) % tau;
+        let step = f64::from(x.abs()) * f64::from(f32::EPSILON);
+        let e = (f64::from(s) - wrapped.sin())
+            .abs()
+            .max((f64::from(c) - wrapped.cos()).abs());
+        assert!(
+            e <= 2.0 * step + 1e-6,
+            "x = {x}: error {e:e}, f32 step {step:e}"
+        );
+    }
+    // No phase is left past 2^24 rad: the angle wraps to zero.
+    assert_eq!(sin_cos(3.0e7), (0.0, 1.0));
+    assert_eq!(sin_cos(-3.0e38), (0.0, 1.0));
+}
+
+#[test]
 fn sin_cos_exact_at_zero_and_nan_for_non_finite() {
     assert_eq!(sin_cos(0.0), (0.0, 1.0));
     for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
