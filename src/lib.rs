@@ -13,6 +13,7 @@
 //! - [`model`]: the learned Hamiltonian model's networks;
 //! - [`reference`](mod@reference): setpoints and the desired attitude from differential flatness;
 //! - [`control`]: the IDA-PBC tracking law and the [`FlightController`];
+//! - [`gains`]: the controller's [`Gains`], derived from the [`VehicleFacts`] a blob carries;
 //! - [`adapt`]: the disturbance adaptation laws: the paper's gradient law and the composite
 //!   (prediction-error) law, with the platform's extra [`Measurement`];
 //! - [`mixer`]: wrench to rotor commands with saturation;
@@ -25,6 +26,7 @@ pub mod adapt;
 pub mod blob;
 pub mod control;
 pub mod fpu;
+pub mod gains;
 pub mod lie;
 pub mod mixer;
 pub mod model;
