@@ -92,3 +92,6 @@ impl SplitMix64 {
         ((self.next_u64() >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
     }
 }
+
+/// The independent blob encoder of `tests/blob.rs` and `tests/blob_format.rs`.
+pub mod blob_ref;
