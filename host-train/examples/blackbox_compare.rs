@@ -5,7 +5,7 @@
 //! (defaults: `/tmp/hfdata`, 60, `0.125,0.5,1`). Prints a markdown table.
 
 use anyhow::{Context, Result};
-use host_train::train::blackbox::{compare, BB_HIDDEN};
+use host_train::train::{compare_blackbox, BB_HIDDEN};
 use std::path::PathBuf;
 
 fn main() -> Result<()> {
@@ -22,7 +22,7 @@ fn main() -> Result<()> {
         .map(str::parse)
         .collect::<Result<_, _>>()
         .context("FRACS")?;
-    let rows = compare(&data, &fracs, epochs)?;
+    let rows = compare_blackbox(&data, &fracs, epochs)?;
     println!(
         "Held-out 4-step RMS errors (pos m / rot rad / vel m/s / rate rad/s), {epochs} epochs, \
          batch 128, seed 0; black box: one tanh MLP, 2 hidden layers of {BB_HIDDEN}, {} params.\n",
@@ -33,7 +33,7 @@ fn main() -> Result<()> {
     );
     println!("|---|---|---|---|---|---|---|");
     for r in &rows {
-        let e = |x: &host_train::train::blackbox::Errors| {
+        let e = |x: &host_train::train::Errors| {
             format!(
                 "{:.2e}, {:.2e}, {:.2e}, {:.2e}",
                 x.pos_m, x.rot_rad, x.vel_m_s, x.rate_rad_s

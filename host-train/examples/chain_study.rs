@@ -8,11 +8,9 @@
 
 use hamflight::model::NominalModel;
 use hamflight::{Gains, VehicleFacts};
-use host_train::control::adapter::CoreController;
-use host_train::control::controller::Controller;
-use host_train::control::{adapter, registry};
-use host_train::fly::eval::{self, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{by_name, load_learned, Controller, CoreController, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
 use host_train::{ControllerSpec, ModelSource};
 use std::path::PathBuf;
 
@@ -62,12 +60,12 @@ fn weights() -> PathBuf {
     WEIGHTS
         .get()
         .cloned()
-        .unwrap_or_else(|| PathBuf::from(registry::DEFAULT_WEIGHTS))
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_WEIGHTS))
 }
 
 fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Box<dyn Controller> {
     if o.0.is_empty() && facts_tau.is_none() && WEIGHTS.get().is_none() {
-        return registry::by_name(name, sc, None).expect("controller");
+        return by_name(name, sc, None).expect("controller");
     }
     let spec = ControllerSpec::parse(name).expect("controller name");
     let mk = |model_facts: VehicleFacts| {
@@ -81,7 +79,7 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
     };
     match spec.model() {
         Some(ModelSource::Learned) => {
-            let m = adapter::load_learned(&weights()).expect("blob");
+            let m = load_learned(&weights()).expect("blob");
             let g = mk(VehicleFacts::of(&m));
             Box::new(CoreController::new(name, m, g))
         }
@@ -90,7 +88,7 @@ fn build(name: &str, sc: &Scenario, o: &Overrides, facts_tau: Option<f32>) -> Bo
             let g = mk(VehicleFacts::of(&m));
             Box::new(CoreController::new(name, m, g))
         }
-        None => registry::by_name(name, sc, None).expect("controller"),
+        None => by_name(name, sc, None).expect("controller"),
     }
 }
 
@@ -170,7 +168,7 @@ fn main() -> anyhow::Result<()> {
         for c in &controllers {
             let mut ctrl = build(c, &sc, &o, facts_tau);
             if margins {
-                use host_train::fly::margins::{margins_of, measure_point, LoopPoint};
+                use host_train::fly::{margins_of, measure_point, LoopPoint};
                 for point in [LoopPoint::Roll, LoopPoint::X] {
                     let sweep = point
                         .default_frequencies_hz()
@@ -190,7 +188,7 @@ fn main() -> anyhow::Result<()> {
                 }
                 continue;
             }
-            let log = eval::fly(&sc, ctrl.as_mut());
+            let log = fly_scenario(&sc, ctrl.as_mut());
             let r = Report::from_flight(&log, &sc, None);
             for e in &r.events {
                 println!(

@@ -19,9 +19,9 @@
 
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, NominalModel};
 use hamflight::{AdaptationLaw, Gains, VehicleFacts};
-use host_train::control::adapter::{load_learned, CoreController};
-use host_train::fly::eval::{self, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{load_learned, CoreController};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
 use nalgebra::{Matrix3, Vector3};
 use std::path::PathBuf;
 
@@ -64,7 +64,7 @@ fn with_true_torque_rows(w: &ModelWeights) -> ModelWeights {
 
 fn score<M: HamiltonianModel>(sc: &Scenario, model: M, gains: Gains) -> String {
     let mut c = CoreController::new("cause", model, gains);
-    let r = Report::from_log(&eval::fly(sc, &mut c), None);
+    let r = Report::from_log(&fly_scenario(sc, &mut c), None);
     match (r.crash_time_s, r.rmse_pos_window_m) {
         (Some(t), _) => format!("crash {t:.2} s"),
         (None, Some(x)) => format!("{:.3}", 100.0 * x),

@@ -4,8 +4,8 @@
 //!
 //! `host-train eval` does the same and also writes the plots; `ControllerSpec::ALL` lists the
 //! controller names.
-use host_train::control::registry;
-use host_train::fly::eval::{fly, Report};
+use host_train::control::by_name;
+use host_train::fly::{fly_scenario, Report};
 use host_train::Scenario;
 
 fn main() {
@@ -23,8 +23,8 @@ fn run() -> anyhow::Result<()> {
     let name = args.next().unwrap_or_else(|| "adaptive".into());
     let scenario = Scenario::load(&file)?;
     // The controller mixes for the scenario's vehicle; learned ones fly weights/default.hfw.
-    let mut controller = registry::by_name(&name, &scenario, None)?;
-    let log = fly(&scenario, controller.as_mut());
+    let mut controller = by_name(&name, &scenario, None)?;
+    let log = fly_scenario(&scenario, controller.as_mut());
     let report = Report::from_flight(&log, &scenario, Some(file.as_ref()));
     match (report.crash_time_s, report.rmse_pos_window_m) {
         (Some(t), _) => anyhow::bail!("{} / {}: crashed at {t:.2} s", report.scenario, name),

@@ -11,10 +11,9 @@
 
 use hamflight::model::{HamiltonianModel, NominalModel};
 use hamflight::{AdaptationLaw, Gains, VehicleFacts};
-use host_train::control::adapter::{load_learned, CoreController};
-use host_train::fly::eval::{self, Report};
-use host_train::sim::plant::StateNoise;
-use host_train::sim::scenario::Scenario;
+use host_train::control::{load_learned, CoreController};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::{Scenario, StateNoise};
 use std::path::PathBuf;
 
 /// RMSE over the report window (m), or `None` on a crash.
@@ -24,7 +23,7 @@ fn rmse<M: HamiltonianModel>(sc: &Scenario, model: M) -> Option<f64> {
         ..Gains::for_vehicle(&VehicleFacts::of(&model))
     };
     let mut c = CoreController::new("noise-budget", model, gains);
-    let r = Report::from_log(&eval::fly(sc, &mut c), None);
+    let r = Report::from_log(&fly_scenario(sc, &mut c), None);
     r.rmse_pos_window_m.filter(|_| r.crash_time_s.is_none())
 }
 

@@ -23,6 +23,10 @@
 //!    ([`pipeline::train`]), `bench-train` ([`pipeline::bench`]), `demo` ([`pipeline::demo`]),
 //!    `vehicle-study` ([`pipeline::vehicle_study`]); [`bridge`]: the JSON-lines bridge for
 //!    external simulators.
+//!
+//! Code outside `host-train/src` (its tests and examples, the Python module, `tools/`) imports
+//! from the crate root and the layers only, by what each layer re-exports (its front door), never
+//! from a layer's submodules (`tools/front-door.py` checks it).
 #![warn(missing_docs)]
 
 pub mod bridge;

@@ -7,14 +7,11 @@
 
 use hamflight::model::{HamiltonianModel, ModelTerms, NominalModel, State};
 use hamflight::{AdaptationLaw, Gains};
-use host_train::control::adapter::CoreController;
-use host_train::control::controller::Controller;
-use host_train::control::{adapter, registry};
-use host_train::fly::eval::{self, Report};
-use host_train::fly::events::EventMetrics;
-use host_train::fly::track;
-use host_train::sim::plant::PlantState;
-use host_train::sim::trajectory::TrajectoryPoint;
+use host_train::control::{
+    core_by_name, gains_with, load_learned, Controller, CoreController, DEFAULT_WEIGHTS,
+};
+use host_train::fly::{estimate_std, fly_scenario, measure_bandwidth_point, EventMetrics, Report};
+use host_train::sim::{PlantState, TrajectoryPoint};
 
 mod flight_common;
 use flight_common::{fly, repo, scenario};
@@ -32,12 +29,12 @@ fn the_composite_law_is_the_default_and_the_paper_law_selectable() {
     assert_eq!(Gains::default().law, AdaptationLaw::Composite);
     assert_eq!(Gains::paper().law, AdaptationLaw::Gradient);
     assert_eq!(
-        adapter::gains_with(AdaptationLaw::Gradient).law,
+        gains_with(AdaptationLaw::Gradient).law,
         AdaptationLaw::Gradient
     );
     // The plain names fly the default law, the named ones theirs.
     let law_of = |name: &str| {
-        registry::core_by_name(name, Some(&repo(registry::DEFAULT_WEIGHTS)))
+        core_by_name(name, Some(&repo(DEFAULT_WEIGHTS)))
             .expect("registered")
             .core_law()
     };
@@ -103,12 +100,12 @@ fn hover_wind_step_peaks_below_60_percent_of_the_paper_law() {
 
 #[test]
 fn composite_bandwidth_at_1_hz() {
-    let weights = repo(registry::DEFAULT_WEIGHTS);
-    let model = adapter::load_learned(&weights).expect("weights load");
-    let mut c = CoreController::new("c", model, adapter::gains_with(AdaptationLaw::Composite));
-    let mut g = CoreController::new("g", model, adapter::gains_with(AdaptationLaw::Gradient));
-    let pc = track::measure(&mut c, 1.0).expect("measured");
-    let pg = track::measure(&mut g, 1.0).expect("measured");
+    let weights = repo(DEFAULT_WEIGHTS);
+    let model = load_learned(&weights).expect("weights load");
+    let mut c = CoreController::new("c", model, gains_with(AdaptationLaw::Composite));
+    let mut g = CoreController::new("g", model, gains_with(AdaptationLaw::Gradient));
+    let pc = measure_bandwidth_point(&mut c, 1.0).expect("measured");
+    let pg = measure_bandwidth_point(&mut g, 1.0).expect("measured");
     // measured: composite 0.97 / 15°, gradient 1.13 / 89°. Bar: ≥ 0.9 and ≤ 45°.
     assert!(
         (0.9..=1.15).contains(&pc.amplitude_ratio),
@@ -159,13 +156,13 @@ fn no_windup_on_the_step() {
 #[test]
 fn composite_estimate_is_calm_under_noise() {
     let sc = scenario("paper-spiral-realistic");
-    let weights = repo(registry::DEFAULT_WEIGHTS);
-    let model = adapter::load_learned(&weights).expect("weights load");
+    let weights = repo(DEFAULT_WEIGHTS);
+    let model = load_learned(&weights).expect("weights load");
     let mut stds = Vec::new();
     for law in [AdaptationLaw::Composite, AdaptationLaw::Gradient] {
-        let mut c = CoreController::new("a", model, adapter::gains_with(law));
-        let log = eval::fly(&sc, &mut c);
-        let s = track::estimate_std(&log, 10.0);
+        let mut c = CoreController::new("a", model, gains_with(law));
+        let log = fly_scenario(&sc, &mut c);
+        let s = estimate_std(&log, 10.0);
         assert_eq!(s.len(), 6);
         stds.push(s);
     }
@@ -211,9 +208,9 @@ fn wrong_features_keep_the_estimate_bounded_and_the_vehicle_up() {
                 scale,
                 bias,
             };
-            let gains = adapter::gains_with(law);
+            let gains = gains_with(law);
             let mut c = CoreController::new("wrong", model, gains);
-            let log = eval::fly(&sc, &mut c);
+            let log = fly_scenario(&sc, &mut c);
             let r = Report::from_log(&log, None);
             assert!(!r.crashed, "{law:?} ×{scale} +{bias}: crashed {r:?}");
             let worst = log
@@ -260,13 +257,13 @@ fn composite_without_an_accelerometer() {
             self.0.step(t, s, r, dt)
         }
     }
-    let weights = repo(registry::DEFAULT_WEIGHTS);
-    let model = adapter::load_learned(&weights).expect("weights load");
+    let weights = repo(DEFAULT_WEIGHTS);
+    let model = load_learned(&weights).expect("weights load");
     for name in ["paper-spiral", "rotor-loss-mid"] {
         let sc = scenario(name);
-        let c = CoreController::new("c", model, adapter::gains_with(AdaptationLaw::Composite));
+        let c = CoreController::new("c", model, gains_with(AdaptationLaw::Composite));
         let mut c = NoAccelerometer(c);
-        let log = eval::fly(&sc, &mut c);
+        let log = fly_scenario(&sc, &mut c);
         let r = Report::from_flight(&log, &sc, None);
         assert!(!r.crashed, "{name}: {r:?}");
         // measured: paper-spiral 0.020 cm; rotor-loss-mid 0.63 cm (0.37 cm before the torque

@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use host_train::control::registry::baseline_by_name as by_name;
-use host_train::fly::eval::{fly, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::baseline_by_name as by_name;
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
 
 fn scenario(name: &str) -> Scenario {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -17,7 +17,7 @@ fn scenario(name: &str) -> Scenario {
 fn run(scn: &str, ctrl: &str) -> Report {
     let s = scenario(scn);
     let mut c = by_name(ctrl, &s).unwrap();
-    let log = fly(&s, c.as_mut());
+    let log = fly_scenario(&s, c.as_mut());
     Report::from_log(&log, None)
 }
 

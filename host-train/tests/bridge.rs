@@ -2,7 +2,7 @@
 //! not stop the stream; a non-finite state gets motors off with a fault flag.
 
 use host_train::bridge::serve;
-use host_train::control::registry::core_by_name;
+use host_train::control::core_by_name;
 
 const HOVER: &str = r#"{"t": 0.0, "p": [0, 0, 1], "R": [[1,0,0],[0,1,0],[0,0,1]], "v": [0,0,0], "w": [0,0,0], "setpoint": {"p": [0, 0, 1]}}"#;
 

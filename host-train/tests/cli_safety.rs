@@ -3,7 +3,7 @@
 //! shipped weights unless `--out` names them. Parsed with the same clap definitions as the binary.
 
 use clap::Parser;
-use host_train::data::import::ImportArgs;
+use host_train::data::ImportArgs;
 use host_train::train::TrainArgs;
 use std::path::PathBuf;
 
@@ -86,7 +86,7 @@ fn import_new_matches_the_command_line_defaults() {
     let parsed = Import::try_parse_from(["import", "--out", "D", "--mass-kg", "0.027"])
         .expect("parses")
         .args;
-    let built = host_train::data::import::ImportArgs::new("D".into(), 0.027);
+    let built = host_train::data::ImportArgs::new("D".into(), 0.027);
     assert_eq!(format!("{parsed:?}"), format!("{built:?}"));
 }
 

@@ -7,10 +7,9 @@
 
 use hamflight::model::{HamiltonianModel, NominalModel};
 use hamflight::Gains;
-use host_train::control::adapter::CoreController;
-use host_train::control::{adapter, registry};
-use host_train::fly::eval::{self, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{by_name, load_learned, CoreController, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, Report, CRASH_ERR_M};
+use host_train::sim::Scenario;
 use std::path::{Path, PathBuf};
 
 fn repo(path: &str) -> PathBuf {
@@ -22,12 +21,12 @@ fn scenario(name: &str) -> Scenario {
 }
 
 fn weights() -> PathBuf {
-    repo(registry::DEFAULT_WEIGHTS)
+    repo(DEFAULT_WEIGHTS)
 }
 
 fn fly(name: &str, sc: &Scenario) -> Report {
-    let mut ctrl = registry::by_name(name, sc, Some(&weights())).expect("controller exists");
-    let log = eval::fly(sc, ctrl.as_mut());
+    let mut ctrl = by_name(name, sc, Some(&weights())).expect("controller exists");
+    let log = fly_scenario(sc, ctrl.as_mut());
     Report::from_log(&log, None)
 }
 
@@ -128,12 +127,12 @@ fn crashes_are_reported_not_silent() {
                 "pid stopped at the crash: {r:?}"
             );
             assert!(r.rmse_pos_window_m.is_none(), "pid scored after its crash");
-            let mut ctrl = registry::by_name(name, &sc, None).expect("pid exists");
-            let log = eval::fly(&sc, ctrl.as_mut());
+            let mut ctrl = by_name(name, &sc, None).expect("pid exists");
+            let log = fly_scenario(&sc, ctrl.as_mut());
             let z = log.p_m.last().map(|p| p[2]).unwrap_or(f64::NAN);
             let e = log.err_m.last().copied().unwrap_or(f64::NAN);
             assert!(
-                z < 0.0 || e > eval::CRASH_ERR_M,
+                z < 0.0 || e > CRASH_ERR_M,
                 "pid flagged as crashed at z = {z} m, error {e} m: neither crash condition"
             );
         } else {
@@ -153,7 +152,7 @@ fn compensated_world_force<M: HamiltonianModel>(
     ctrl: &mut CoreController<M>,
     until_s: f64,
 ) -> nalgebra::Vector3<f64> {
-    use host_train::control::controller::Controller;
+    use host_train::control::Controller;
     let mut plant = sc.plant();
     let dt = sc.control_dt_s();
     let steps = (until_s / dt).round() as usize;
@@ -183,7 +182,7 @@ fn adaptation_converges_to_a_constant_wind() {
     );
     let mut learned = CoreController::new(
         "adaptive",
-        adapter::load_learned(&weights()).expect("shipped weights load"),
+        load_learned(&weights()).expect("shipped weights load"),
         Gains::default(),
     );
     let f_nominal = compensated_world_force(&sc, &mut nominal, 5.0);

@@ -3,11 +3,12 @@
 
 use std::path::PathBuf;
 
-use host_train::data::collect::{collect, CollectConfig};
-use host_train::io::dataset::{
-    self, load, save, segments, windows, Dataset, WindowSpec, CSV_HEADER, FORMAT,
+use host_train::data::{collect_dataset, CollectConfig};
+use host_train::io::{
+    dataset_windows, load_dataset, sample_segments, save_dataset, Dataset, WindowSpec,
+    DATASET_CSV_HEADER, DATASET_FORMAT, DATASET_FORMAT_V1,
 };
-use host_train::sim::plant::{Disturbance, Effects, Plant, VehicleParams};
+use host_train::sim::{Disturbance, Effects, Plant, VehicleParams};
 
 fn tmpdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!(
@@ -44,10 +45,10 @@ fn default_collection_adds_a_calm_disturbance_free_realization() {
         ..small()
     };
     assert_eq!(CollectConfig::default().calm_realizations, 1);
-    let m = collect(&with, &one).unwrap();
-    collect(&without, &small()).unwrap();
+    let m = collect_dataset(&with, &one).unwrap();
+    collect_dataset(&without, &small()).unwrap();
     assert_eq!(m.realizations.len(), 3);
-    let ds = load(&with).unwrap();
+    let ds = load_dataset(&with).unwrap();
     let calm = &ds.realizations[2].meta;
     assert!(calm.disturbance_free);
     assert_eq!(calm.wind_m_s2, Some([0.0; 3]));
@@ -69,15 +70,15 @@ fn default_collection_adds_a_calm_disturbance_free_realization() {
 fn collected_data_has_the_documented_shape_and_resimulates() {
     let dir = tmpdir("shape");
     let cfg = small();
-    let m = collect(&dir, &cfg).unwrap();
+    let m = collect_dataset(&dir, &cfg).unwrap();
     assert_eq!(m.realizations.len(), 2);
     let text = std::fs::read_to_string(dir.join("realization_00.csv")).unwrap();
-    assert_eq!(text.lines().next().unwrap(), CSV_HEADER);
+    assert_eq!(text.lines().next().unwrap(), DATASET_CSV_HEADER);
     // 3 flights (poses) of 20 windows of 4 steps: 81 samples each.
     assert_eq!(text.lines().count(), 1 + 3 * 81);
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
-    assert_eq!(manifest["format"], FORMAT);
+    assert_eq!(manifest["format"], DATASET_FORMAT);
     assert_eq!(manifest["sample_hz"], 240.0);
     assert_eq!(manifest["mass_kg"], 0.027);
     assert_eq!(manifest["gravity_m_s2"], 9.8);
@@ -88,9 +89,9 @@ fn collected_data_has_the_documented_shape_and_resimulates() {
     assert_eq!(manifest["realizations"][1]["samples"], 243);
     assert_eq!(manifest["realizations"][1]["disturbance_free"], false);
 
-    let ds = load(&dir).unwrap();
+    let ds = load_dataset(&dir).unwrap();
     // The paper's windows: 5 states every 4 samples, one held command each, 60 per realization.
-    let at = windows(&ds, WindowSpec::default()).unwrap();
+    let at = dataset_windows(&ds, WindowSpec::default()).unwrap();
     assert_eq!(at.len(), 120);
     for w in &at {
         let s = &ds.realizations[w.realization].flights[w.flight].samples[w.start..w.start + 5];
@@ -107,7 +108,7 @@ fn collected_data_has_the_documented_shape_and_resimulates() {
         assert!(d[..2].iter().all(|x| (0.94..=0.98).contains(x)) && d[2] == 1.0 && d[3] == 1.0);
         assert_eq!(r.flights.len(), 3);
         for flight in &r.flights {
-            assert_eq!(segments(&flight.samples, 240.0), vec![0..81]);
+            assert_eq!(sample_segments(&flight.samples, 240.0), vec![0..81]);
             for (k, pair) in flight.samples.windows(2).enumerate() {
                 let (a, b) = (&pair[0], &pair[1]);
                 assert!((b.t_s - a.t_s - 1.0 / 240.0).abs() < 1e-9);
@@ -138,7 +139,7 @@ fn collected_data_has_the_documented_shape_and_resimulates() {
     // save ∘ load is the identity: the CSVs bit for bit; the manifest's numbers to the last
     // digits (serde_json's default float parser is not always correctly rounded).
     let again = tmpdir("again");
-    save(&again, &ds).unwrap();
+    save_dataset(&again, &ds).unwrap();
     for f in ["realization_00.csv", "realization_01.csv"] {
         assert_eq!(
             std::fs::read(dir.join(f)).unwrap(),
@@ -146,7 +147,7 @@ fn collected_data_has_the_documented_shape_and_resimulates() {
             "{f}"
         );
     }
-    let back = load(&again).unwrap();
+    let back = load_dataset(&again).unwrap();
     for (a, b) in back.realizations.iter().zip(&ds.realizations) {
         assert_eq!(a.flights, b.flights);
         assert_eq!(
@@ -173,8 +174,8 @@ fn collection_is_deterministic_for_a_seed() {
         seed: 3,
         ..CollectConfig::default()
     };
-    collect(&a, &cfg).unwrap();
-    collect(&b, &cfg).unwrap();
+    collect_dataset(&a, &cfg).unwrap();
+    collect_dataset(&b, &cfg).unwrap();
     for f in ["manifest.json", "realization_00.csv"] {
         assert_eq!(
             std::fs::read(a.join(f)).unwrap(),
@@ -182,7 +183,7 @@ fn collection_is_deterministic_for_a_seed() {
         );
     }
     let c = tmpdir("det-c");
-    collect(&c, &CollectConfig { seed: 4, ..cfg }).unwrap();
+    collect_dataset(&c, &CollectConfig { seed: 4, ..cfg }).unwrap();
     assert_ne!(
         std::fs::read(a.join("realization_00.csv")).unwrap(),
         std::fs::read(c.join("realization_00.csv")).unwrap()
@@ -201,8 +202,8 @@ fn one_flight_dataset() -> (PathBuf, Dataset) {
         calm_realizations: 0,
         ..CollectConfig::default()
     };
-    collect(&dir, &cfg).unwrap();
-    let ds = load(&dir).unwrap();
+    collect_dataset(&dir, &cfg).unwrap();
+    let ds = load_dataset(&dir).unwrap();
     (dir, ds)
 }
 
@@ -212,11 +213,11 @@ fn gaps_and_backward_timestamps_split_a_flight_and_flags_cut_windows() {
     let n = ds.realizations[0].flights[0].samples.len();
     assert_eq!(n, 41);
     let spec = |len, stride| WindowSpec { len, stride };
-    assert_eq!(windows(&ds, spec(5, 4)).unwrap().len(), 10);
-    assert_eq!(windows(&ds, spec(5, 1)).unwrap().len(), 37);
-    assert_eq!(windows(&ds, spec(9, 8)).unwrap().len(), 5);
-    assert!(windows(&ds, spec(1, 1)).is_err());
-    assert!(windows(&ds, spec(5, 0)).is_err());
+    assert_eq!(dataset_windows(&ds, spec(5, 4)).unwrap().len(), 10);
+    assert_eq!(dataset_windows(&ds, spec(5, 1)).unwrap().len(), 37);
+    assert_eq!(dataset_windows(&ds, spec(9, 8)).unwrap().len(), 5);
+    assert!(dataset_windows(&ds, spec(1, 1)).is_err());
+    assert!(dataset_windows(&ds, spec(5, 0)).is_err());
     {
         let s = &mut ds.realizations[0].flights[0].samples;
         // A gap of one missing sample after sample 12, and a backwards timestamp at 30.
@@ -225,10 +226,10 @@ fn gaps_and_backward_timestamps_split_a_flight_and_flags_cut_windows() {
         }
         s[30].t_s = s[29].t_s - 1e-4;
     }
-    let seg = segments(&ds.realizations[0].flights[0].samples, 240.0);
+    let seg = sample_segments(&ds.realizations[0].flights[0].samples, 240.0);
     assert_eq!(seg, vec![0..13, 13..30, 30..31, 31..41]);
     // 13 → 3 windows, 17 → 4, 1 → 0, 10 → 2.
-    assert_eq!(windows(&ds, spec(5, 4)).unwrap().len(), 9);
+    assert_eq!(dataset_windows(&ds, spec(5, 4)).unwrap().len(), 9);
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -242,7 +243,7 @@ fn loader_errors_name_file_and_line() {
         let mut l = good.clone();
         l[k] = line;
         std::fs::write(&f, l.join("\n") + "\n").unwrap();
-        format!("{:#}", load(&dir).unwrap_err())
+        format!("{:#}", load_dataset(&dir).unwrap_err())
     };
     let e = with_line(3, good[3].replacen(',', ",x", 3));
     assert!(
@@ -262,18 +263,18 @@ fn loader_errors_name_file_and_line() {
     let e = with_line(0, "flight,t_s".into());
     assert!(e.contains("line 1") && e.contains("header"), "{e}");
     std::fs::write(&f, &text).unwrap();
-    load(&dir).unwrap();
+    load_dataset(&dir).unwrap();
 
     let mpath = dir.join("manifest.json");
     let manifest = std::fs::read_to_string(&mpath).unwrap();
-    std::fs::write(&mpath, manifest.replace(FORMAT, dataset::FORMAT_V1)).unwrap();
-    let e = format!("{:#}", load(&dir).unwrap_err());
+    std::fs::write(&mpath, manifest.replace(DATASET_FORMAT, DATASET_FORMAT_V1)).unwrap();
+    let e = format!("{:#}", load_dataset(&dir).unwrap_err());
     assert!(
         e.contains("manifest.json") && e.contains("no longer read") && e.contains("collect"),
         "{e}"
     );
     std::fs::remove_file(&mpath).unwrap();
-    let e = format!("{:#}", load(&dir).unwrap_err());
+    let e = format!("{:#}", load_dataset(&dir).unwrap_err());
     assert!(e.contains("manifest.json"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,10 +1,8 @@
 //! Time-varying wind, mid-flight faults and the synthesized accelerometer (the adaptation scenario
 //! format), and the event scores of report.json.
 
-use host_train::fly::eval::FlightLog;
-use host_train::fly::events::{event_metrics, RECOVERED_ERR_M};
-use host_train::sim::plant::{Plant, PlantState};
-use host_train::sim::scenario::Scenario;
+use host_train::fly::{event_metrics, FlightLog, RECOVERED_ERR_M};
+use host_train::sim::{Plant, PlantState, Scenario};
 use nalgebra::Vector3;
 
 fn from_toml(extra: &str) -> anyhow::Result<Scenario> {
@@ -75,7 +73,7 @@ fn bad_wind_keys_name_the_key() {
 fn accelerometer_reads_the_specific_force_in_the_body_frame() {
     let sc = from_toml("[disturbance]\nwind_m_s2 = [0.5, -0.25, 0.0]\n").expect("parses");
     let mut p: Plant = sc.plant();
-    let rot = host_train::sim::plant::rot_from_rpy(Vector3::new(0.1, -0.2, 0.3));
+    let rot = host_train::sim::rot_from_rpy(Vector3::new(0.1, -0.2, 0.3));
     p.set_state(PlantState { rot, ..*p.state() });
     // Rotors at hover speed (the plant's start): thrust m g along body z, plus the wind.
     let thrust = 4.0 * p.params.kf_n_per_rpm2 * p.params.hover_rpm().powi(2);

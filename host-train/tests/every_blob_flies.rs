@@ -3,11 +3,11 @@
 //! heavy vehicle the nominal model does not know is `vehicle_mismatch.rs` (three more seeds).
 //! Run in release: `cargo test --release -p host-train --test every_blob_flies`.
 
-use host_train::control::registry;
-use host_train::data::collect::{CollectArgs, CollectConfig};
-use host_train::fly::eval::{self, Report};
-use host_train::pipeline::train::run;
-use host_train::sim::scenario::Scenario;
+use host_train::control::core_by_name;
+use host_train::data::{CollectArgs, CollectConfig};
+use host_train::fly::{fly_scenario, Report};
+use host_train::pipeline::run_train;
+use host_train::sim::Scenario;
 use host_train::train::TrainConfig;
 use std::path::Path;
 
@@ -30,7 +30,7 @@ fn three_seeds_on_the_stock_vehicle_fly_adaptive_no_worse_than_learned() {
             ..CollectConfig::default()
         },
     };
-    host_train::data::collect::run(&args).expect("collect");
+    host_train::data::run_collect(&args).expect("collect");
     let scenarios = [scenario("paper-spiral"), scenario("paper-spiral-realistic")];
     for seed in 0..3u64 {
         let cfg = TrainConfig {
@@ -40,13 +40,13 @@ fn three_seeds_on_the_stock_vehicle_fly_adaptive_no_worse_than_learned() {
             ..TrainConfig::default()
         };
         let out = dir.join(format!("seed-{seed}.hfw"));
-        let r = run(&cfg, &args.out, &out, true).expect("train writes a blob");
+        let r = run_train(&cfg, &args.out, &out, true).expect("train writes a blob");
         let check = r.flight_check.as_ref().expect("the flight check ran");
         assert!(check.passed(), "seed {seed}: {check:?}");
         for sc in &scenarios {
             let fly = |name: &str| -> Report {
-                let mut c = registry::core_by_name(name, Some(&out)).expect("controller");
-                let log = eval::fly(sc, c.as_mut());
+                let mut c = core_by_name(name, Some(&out)).expect("controller");
+                let log = fly_scenario(sc, c.as_mut());
                 Report::from_log(&log, None)
             };
             let (a, l) = (fly("adaptive"), fly("learned"));

@@ -2,18 +2,19 @@
 //! would crash the adaptive controller is refused with a reason, and `train` records the check.
 
 use hamflight::model::ModelWeights;
-use host_train::control::{adapter, registry};
-use host_train::io::dataset::VehicleDescription;
-use host_train::pipeline::check;
+use host_train::control::{load_learned, DEFAULT_WEIGHTS};
+use host_train::io::VehicleDescription;
+use host_train::pipeline::{
+    flight_check_scenario_toml, require_flight_check, run_flight_check,
+    FLIGHT_CHECK_ADAPTIVE_MARGIN,
+};
 use std::path::Path;
 
 fn shipped() -> ModelWeights {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
-        .join(registry::DEFAULT_WEIGHTS);
-    adapter::load_learned(&path)
-        .expect("shipped weights")
-        .weights
+        .join(DEFAULT_WEIGHTS);
+    load_learned(&path).expect("shipped weights").weights
 }
 
 fn cf2x() -> VehicleDescription {
@@ -27,7 +28,7 @@ fn cf2x() -> VehicleDescription {
 
 #[test]
 fn shipped_blob_passes_on_the_stock_vehicle() {
-    let c = check::run(&shipped(), 0.027, &cf2x()).expect("check runs");
+    let c = run_flight_check(&shipped(), 0.027, &cf2x()).expect("check runs");
     println!("{c:?}");
     assert!(c.passed(), "{c:?}");
     // measured: adaptive 0.012 cm, without adaptation 4.3 cm over t ≥ 5 s.
@@ -49,14 +50,14 @@ fn wrong_gain(scale: f32) -> ModelWeights {
 #[test]
 fn a_blob_that_crashes_is_refused_with_a_reason() {
     for scale in [3.0f32, -1.0] {
-        let c = check::run(&wrong_gain(scale), 0.027, &cf2x()).expect("check runs");
+        let c = run_flight_check(&wrong_gain(scale), 0.027, &cf2x()).expect("check runs");
         println!("g ×{scale}: {c:?}");
     }
     let w = wrong_gain(SCALE);
-    let c = check::run(&w, 0.027, &cf2x()).expect("check runs");
+    let c = run_flight_check(&w, 0.027, &cf2x()).expect("check runs");
     println!("{c:?}");
     assert!(!c.passed() && c.adaptive_crash_s.is_some(), "{c:?}");
-    let err = check::require(&hamflight::model::LearnedModel::new(w), 0.027, &cf2x())
+    let err = require_flight_check(&hamflight::model::LearnedModel::new(w), 0.027, &cf2x())
         .unwrap_err()
         .to_string();
     assert!(
@@ -88,7 +89,7 @@ fn torque_coupled_features_fly_no_worse_than_without_adaptation() {
             l2.bias[t] += 30.0 * bf;
         }
     }
-    let c = check::run(&w, 0.027, &cf2x()).expect("check runs");
+    let c = run_flight_check(&w, 0.027, &cf2x()).expect("check runs");
     println!("{c:?}");
     // measured: gradient law 3.09 cm, without adaptation 3.09 cm on the windy spiral. The
     // composite law flew these features at 5.6 cm, worse than without adaptation, until its
@@ -101,7 +102,7 @@ fn torque_coupled_features_fly_no_worse_than_without_adaptation() {
     );
     assert!(g.crash_s.is_none(), "{c:?}");
     assert!(
-        g.rmse_m.unwrap() <= none.rmse_m.unwrap() + check::ADAPTIVE_MARGIN,
+        g.rmse_m.unwrap() <= none.rmse_m.unwrap() + FLIGHT_CHECK_ADAPTIVE_MARGIN,
         "{c:?}"
     );
     let comp = c
@@ -109,7 +110,7 @@ fn torque_coupled_features_fly_no_worse_than_without_adaptation() {
         .expect("composite flight");
     assert!(comp.crash_s.is_none(), "{c:?}");
     assert!(
-        comp.rmse_m.unwrap() <= none.rmse_m.unwrap() + check::ADAPTIVE_MARGIN,
+        comp.rmse_m.unwrap() <= none.rmse_m.unwrap() + FLIGHT_CHECK_ADAPTIVE_MARGIN,
         "{c:?}"
     );
     assert!(c.failure.is_none(), "{c:?}");
@@ -123,7 +124,7 @@ fn the_check_flies_the_described_vehicle() {
         motor_tau_s: Some(0.02),
         description: None,
     };
-    let toml = check::scenario_toml(0.034, &heavy);
+    let toml = flight_check_scenario_toml(0.034, &heavy);
     for key in [
         "mass_kg = 0.034",
         "inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.82e-5]",
@@ -133,7 +134,7 @@ fn the_check_flies_the_described_vehicle() {
         assert!(toml.contains(key), "{key} missing in\n{toml}");
     }
     // The stock blob on that vehicle still flies (the adaptation absorbs the mass error).
-    let c = check::run(&shipped(), 0.034, &heavy).expect("check runs");
+    let c = run_flight_check(&shipped(), 0.034, &heavy).expect("check runs");
     println!("{c:?}");
     assert!(c.adaptive_crash_s.is_none(), "{c:?}");
 }
@@ -145,7 +146,7 @@ fn the_check_flies_the_described_vehicle() {
 #[test]
 fn untaught_feature_directions_are_backed_off_to_the_nominal_ones() {
     use hamflight::model::FEATURES;
-    use host_train::train::backoff;
+    use host_train::train::backoff_candidates;
     // The nominal features plus a steep pseudo-random attitude dependence in every column but
     // the z force's (a small LCG: deterministic, no dependencies).
     let mut w = ModelWeights::prior_with_inertia(&nalgebra::Vector3::new(1.4e-5, 1.4e-5, 2.17e-5));
@@ -168,7 +169,7 @@ fn untaught_feature_directions_are_backed_off_to_the_nominal_ones() {
             weights.iter_mut().for_each(|v| *v = next(OUTPUT_AMP));
         }
     }
-    let c = check::run(&w, 0.027, &cf2x()).expect("check runs");
+    let c = run_flight_check(&w, 0.027, &cf2x()).expect("check runs");
     println!("random: {c:?}");
     // measured: the gradient law 8.78 cm against 3.09 cm without adaptation.
     assert!(!c.passed(), "{c:?}");
@@ -179,10 +180,10 @@ fn untaught_feature_directions_are_backed_off_to_the_nominal_ones() {
             [n, -n, -0.4 - 0.15 * j as f32, 0.0, n, 0.0]
         })
         .collect();
-    let tries = backoff::candidates(&w, &a, true);
+    let tries = backoff_candidates(&w, &a, true);
     let excited = &tries[1];
     assert_eq!((excited.excited_dims, excited.kept), (1, 1.0));
-    let c = check::run(&excited.weights, 0.027, &cf2x()).expect("check runs");
+    let c = run_flight_check(&excited.weights, 0.027, &cf2x()).expect("check runs");
     println!("excited only: {c:?}");
     // measured: the gradient law 0.014 cm.
     assert!(c.passed(), "{c:?}");

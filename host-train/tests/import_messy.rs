@@ -6,9 +6,9 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use host_train::data::import::{self, ImportArgs};
-use host_train::io::dataset;
-use host_train::sim::vehicle::{VehicleFile, RPM_PER_RAD_S};
+use host_train::data::{fix_rotor_glitches, run_import, FileSummary, ImportArgs};
+use host_train::io::load_dataset;
+use host_train::sim::{VehicleFile, RPM_PER_RAD_S};
 
 fn tmpdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hamflight-messy-{tag}-{}", std::process::id()));
@@ -90,7 +90,7 @@ fn import(
     dir: &Path,
     text: &str,
     tweak: impl FnOnce(&mut ImportArgs),
-) -> anyhow::Result<Vec<import::FileSummary>> {
+) -> anyhow::Result<Vec<FileSummary>> {
     let log = dir.join("log.csv");
     std::fs::write(&log, text).expect("write log");
     let vf = dir.join("vehicle.toml");
@@ -103,7 +103,7 @@ fn import(
         ..ImportArgs::new(dir.join("data"), 0.0)
     };
     tweak(&mut a);
-    import::run(&a)
+    run_import(&a)
 }
 
 #[test]
@@ -112,7 +112,7 @@ fn rotor_speeds_become_the_realized_wrench_and_the_vehicle_is_saved() {
     let s = import(&dir, &csv(&cruise(400)), |_| {}).expect("imports");
     assert_eq!(s[0].flights, 1);
     assert_eq!((s[0].repeated_states, s[0].rotor_glitches), (0, 0));
-    let ds = dataset::load(dir.join("data")).expect("loads");
+    let ds = load_dataset(dir.join("data")).expect("loads");
     assert_eq!(ds.manifest.mass_kg, 0.045);
     assert_eq!(ds.manifest.gravity_m_s2, 9.81);
     let d = ds.manifest.vehicle.description.as_ref().expect("saved");
@@ -163,7 +163,7 @@ fn rotor_speed_glitches_are_interpolated_and_counted() {
     rows[300].w_rad_s[0] = -5.0;
     let s = import(&dir, &csv(&rows), |_| {}).expect("imports");
     assert_eq!(s[0].rotor_glitches, 3, "{:?}", s[0]);
-    let ds = dataset::load(dir.join("data")).expect("loads");
+    let ds = load_dataset(dir.join("data")).expect("loads");
     let f = &ds.realizations[0].flights[0].samples;
     assert!(f
         .iter()
@@ -171,7 +171,7 @@ fn rotor_speed_glitches_are_interpolated_and_counted() {
     // Without the fix the 6e6 eRPM reading would be over 2,000 × the weight.
     let mut v = vec![[w; 4]; 3];
     v[1][2] = 6e6 / 6.0 / RPM_PER_RAD_S;
-    let n = import::fix_rotor_glitches(
+    let n = fix_rotor_glitches(
         &[0.0, 0.01, 0.02],
         &mut v,
         vehicle().max_rotor_speed_rad_s(),
@@ -200,7 +200,7 @@ fn an_aggressive_descent_is_flight_and_a_table_landing_is_not() {
     let s = import(&dir, &csv(&rows), |_| {}).expect("imports");
     // Flight 0–5 s (the descent inside it) and 6–8 s: two flights.
     assert_eq!(s[0].flights, 2, "{:?}", s[0]);
-    let ds = dataset::load(dir.join("data")).expect("loads");
+    let ds = load_dataset(dir.join("data")).expect("loads");
     let first = &ds.realizations[0].flights[0].samples;
     assert!(first.iter().any(|x| (2.0..2.5).contains(&x.t_s)));
     assert!(first.iter().all(|x| x.t_s < 4.6));

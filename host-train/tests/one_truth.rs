@@ -1,8 +1,8 @@
 //! Facts written in more than one place, checked against each other: where two copies can drift
 //! apart, a test says which one moved.
 
-use host_train::io::usdlog::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
-use host_train::sim::plant::VehicleParams;
+use host_train::io::{LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS};
+use host_train::sim::VehicleParams;
 use std::path::Path;
 
 fn repo_file(rel: &str) -> String {
@@ -69,7 +69,7 @@ fn the_default_law_is_named_truly() {
         #[allow(unreachable_patterns)]
         _ => "composite",
     };
-    let registry = host_train::control::spec::ControllerSpec::parse("adaptive")
+    let registry = host_train::control::ControllerSpec::parse("adaptive")
         .map(|s| s.about.to_lowercase())
         .expect("`adaptive` is registered");
     assert!(
@@ -87,16 +87,16 @@ fn eval_help_names_every_registered_controller() {
         let mut cmd = cmd;
         cmd.render_long_help().to_string()
     };
-    let help = help_of(host_train::fly::eval::EvalArgs::augment_args(
-        clap::Command::new("eval"),
-    ));
+    let help = help_of(host_train::fly::EvalArgs::augment_args(clap::Command::new(
+        "eval",
+    )));
     let words: Vec<&str> = help
         .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
         .collect();
     let bridge = help_of(host_train::bridge::BridgeArgs::augment_args(
         clap::Command::new("bridge"),
     ));
-    for name in host_train::control::spec::core_names() {
+    for name in host_train::control::core_names() {
         assert!(
             bridge
                 .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
@@ -104,7 +104,7 @@ fn eval_help_names_every_registered_controller() {
             "`bridge --controller`'s help does not name `{name}`: {bridge}"
         );
     }
-    for name in host_train::control::registry::names() {
+    for name in host_train::control::names() {
         assert!(
             words.contains(&name),
             "`eval --controller`'s help does not name `{name}`: {help}"
@@ -116,7 +116,7 @@ fn eval_help_names_every_registered_controller() {
 /// list and the constructors cannot drift apart.
 #[test]
 fn every_registered_name_builds() {
-    use host_train::control::registry;
+    use host_train::control::{by_name, names};
     let sc = host_train::Scenario::from_toml_str(
         "duration_s = 1.0\n[trajectory]\nkind = \"hover\"\nposition_m = [0.0, 0.0, 1.0]\n",
         "<registry>",
@@ -124,8 +124,8 @@ fn every_registered_name_builds() {
     )
     .expect("scenario");
     let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join("../weights/default.hfw");
-    for name in registry::names() {
-        let c = registry::by_name(name, &sc, Some(&weights))
+    for name in names() {
+        let c = by_name(name, &sc, Some(&weights))
             .unwrap_or_else(|e| panic!("`{name}` is registered but does not build: {e:#}"));
         assert_eq!(c.name(), name);
     }

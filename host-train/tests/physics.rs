@@ -1,8 +1,6 @@
 //! Physics checks of the SITL plant against closed forms.
 
-use host_train::sim::plant::{
-    rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams,
-};
+use host_train::sim::{rot_from_rpy, Disturbance, Effects, Plant, PlantState, VehicleParams};
 use nalgebra::{Matrix3, Vector3};
 
 const DT: f64 = 1e-3;

@@ -16,27 +16,25 @@
 //! `HAMFLIGHT_PIL_SECONDS` sets the simulated flight length (default 10 s, at least 10);
 //! `HAMFLIGHT_PIL_SCENARIO` another scenario file (default `scenarios/paper-spiral.toml`).
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use hamflight::model::{HamiltonianModel, LearnedModel, NominalModel};
-use hamflight::{AdaptationLaw, FlightController, Gains, Setpoint, State};
-use host_train::control::controller::Controller;
-use host_train::fly::eval::{fly, Report};
-use host_train::sim::plant::PlantState;
-use host_train::sim::scenario::Scenario;
-use host_train::sim::trajectory::TrajectoryPoint;
+use hamflight::{AdaptationLaw, FlightController, Gains, State};
+use host_train::control::Controller;
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::{PlantState, Scenario, TrajectoryPoint};
 
 /// The firmware's link frames, compiled from the very same file.
 #[allow(dead_code)]
 #[path = "../../firmware/src/link.rs"]
 mod link;
 
-use link::{CostUnit, Downlink, FrameDecoder, Hello, Input, ModelKind, Uplink, WireState};
+use link::{CostUnit, Downlink, FrameDecoder, Hello, ModelKind, Uplink, WireState};
+
+mod qemu_common;
+use qemu_common::{build_firmware, qemu_available, LinkPort, Qemu, QemuController};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -95,261 +93,6 @@ impl<M: HamiltonianModel> Controller for NativeController<M> {
                 .map(|&x| f64::from(x))
                 .collect(),
         )
-    }
-}
-
-fn qemu_available() -> bool {
-    Command::new("qemu-system-arm")
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false)
-}
-
-/// Serialises the firmware builds of the tests in this binary: they share the firmware's target
-/// directory, where each build overwrites the same `release/qemu`, and each copies its ELF away
-/// before the next starts.
-static BUILD: Mutex<()> = Mutex::new(());
-
-/// Builds the QEMU firmware (release) with `features` (`qemu` and more: `loop-1khz` runs the
-/// loop at 1 kHz), with the default features (the composite adaptation law) or without them
-/// (the paper's gradient law alone), in its own workspace's target directory, the one
-/// `cargo fw-build` fills, and returns a copy of the ELF named after the features.
-fn build_firmware(features: &str, default_features: bool) -> PathBuf {
-    let dir = repo().join("firmware");
-    let target = dir.join("target");
-    let _lock: MutexGuard<()> = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-    let mut cmd = Command::new("cargo");
-    cmd.current_dir(&dir).args([
-        "build",
-        "--release",
-        "--features",
-        features,
-        "--bin",
-        "qemu",
-        "--target-dir",
-    ]);
-    cmd.arg(&target);
-    if !default_features {
-        cmd.arg("--no-default-features");
-    }
-    // The outer cargo's settings must not leak into the firmware's own workspace.
-    for var in [
-        "CARGO_TARGET_DIR",
-        "CARGO_BUILD_TARGET",
-        "RUSTFLAGS",
-        "CARGO_ENCODED_RUSTFLAGS",
-        "RUSTUP_TOOLCHAIN",
-        "CARGO_MAKEFLAGS",
-    ] {
-        cmd.env_remove(var);
-    }
-    let out = cmd
-        .output()
-        .expect("cannot run cargo to build the firmware");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    // rustup adds rust-toolchain.toml's target only when it installs the toolchain.
-    let hint = if stderr.contains("can't find crate for `core`") {
-        "\nthe thumbv7em-none-eabihf target is missing: rustup target add thumbv7em-none-eabihf \
-         (or run firmware/tools/ensure-target.sh)"
-    } else {
-        ""
-    };
-    assert!(
-        out.status.success(),
-        "firmware build failed (cd firmware && cargo build --release --features {features} --bin qemu{}):\n{stderr}{hint}",
-        if default_features { "" } else { " --no-default-features" }
-    );
-    let built = target.join("thumbv7em-none-eabihf/release/qemu");
-    let copy = target.join(format!(
-        "pil-qemu-{}{}.elf",
-        features.replace(',', "-"),
-        if default_features { "" } else { "-gradient" }
-    ));
-    std::fs::copy(&built, &copy)
-        .unwrap_or_else(|e| panic!("cannot copy {} to {}: {e}", built.display(), copy.display()));
-    copy
-}
-
-/// QEMU with its output collected; killed on drop.
-struct Qemu {
-    child: Child,
-    output: Arc<Mutex<String>>,
-}
-
-impl Qemu {
-    fn start(elf: &Path, port: u16) -> Self {
-        let mut child = Command::new("qemu-system-arm")
-            .args(["-M", "netduinoplus2", "-nographic", "-monitor", "none"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            // Deterministic instruction counting: SysTick then counts instructions, and the step
-            // cost printed below is the same on every run.
-            .args(["-icount", "shift=0"])
-            // nodelay: the guest writes one byte at a time; with Nagle's algorithm against the
-            // host's delayed ACKs every frame would wait ~40 ms.
-            .args(["-serial", &format!("tcp:127.0.0.1:{port},nodelay=on")])
-            .arg("-kernel")
-            .arg(elf)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("cannot start qemu-system-arm");
-        let output = Arc::new(Mutex::new(String::new()));
-        for stream in [
-            child
-                .stdout
-                .take()
-                .map(|s| Box::new(s) as Box<dyn Read + Send>),
-            child
-                .stderr
-                .take()
-                .map(|s| Box::new(s) as Box<dyn Read + Send>),
-        ]
-        .into_iter()
-        .flatten()
-        {
-            let out = Arc::clone(&output);
-            std::thread::spawn(move || {
-                for line in BufReader::new(stream).lines().map_while(Result::ok) {
-                    if let Ok(mut o) = out.lock() {
-                        o.push_str(&line);
-                        o.push('\n');
-                    }
-                }
-            });
-        }
-        Self { child, output }
-    }
-
-    fn output(&self) -> String {
-        self.output.lock().map(|o| o.clone()).unwrap_or_default()
-    }
-
-    /// Waits for QEMU to exit by itself (after Finish); true if it did in time.
-    fn wait_exit(&mut self, timeout: Duration) -> bool {
-        let t0 = Instant::now();
-        while t0.elapsed() < timeout {
-            if let Ok(Some(st)) = self.child.try_wait() {
-                return st.success();
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        false
-    }
-}
-
-impl Drop for Qemu {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// The host end of the firmware's link.
-struct LinkPort {
-    stream: TcpStream,
-    dec: FrameDecoder,
-    bad_frames: u32,
-    buf: Vec<u8>,
-    pos: usize,
-}
-
-impl LinkPort {
-    fn send(&mut self, msg: &Uplink) {
-        let mut buf = [0u8; link::MAX_FRAME];
-        let n = link::encode(msg, &mut buf).expect("uplink frame fits");
-        self.stream
-            .write_all(&buf[..n])
-            .expect("write to the firmware's UART");
-    }
-
-    /// Next message from the firmware, or None on timeout or a closed connection.
-    fn recv(&mut self, timeout: Duration) -> Option<Downlink> {
-        let t0 = Instant::now();
-        loop {
-            while let Some(&b) = self.buf.get(self.pos) {
-                self.pos += 1;
-                match self.dec.push::<Downlink>(b) {
-                    Some(Ok(msg)) => return Some(msg),
-                    Some(Err(_)) => self.bad_frames += 1,
-                    None => {}
-                }
-            }
-            let left = timeout.checked_sub(t0.elapsed())?;
-            self.stream
-                .set_read_timeout(Some(left.max(Duration::from_millis(1))))
-                .ok()?;
-            self.buf.resize(4096, 0);
-            self.pos = 0;
-            match (&self.stream).read(&mut self.buf) {
-                Ok(0) | Err(_) => {
-                    self.buf.clear();
-                    return None;
-                }
-                Ok(n) => self.buf.truncate(n),
-            }
-        }
-    }
-}
-
-/// The firmware as a host [`Controller`]: each step is one Input frame out, one Telemetry back.
-struct QemuController {
-    port: LinkPort,
-    seq: u32,
-    /// The setpoint last sent (the firmware holds it).
-    sent_setpoint: Option<Setpoint>,
-    /// Inputs sent without a setpoint.
-    bare_inputs: u32,
-    costs: Vec<u32>,
-    last_a: Vec<f64>,
-    faults_seen: u16,
-}
-
-impl Controller for QemuController {
-    fn name(&self) -> &str {
-        "qemu-firmware"
-    }
-
-    fn reset(&mut self) {}
-
-    fn step(&mut self, _t: f64, state: &PlantState, r: &TrajectoryPoint, _dt: f64) -> [f64; 4] {
-        self.seq += 1;
-        let sp = Setpoint::from(r);
-        let setpoint = if self.sent_setpoint == Some(sp) {
-            self.bare_inputs += 1;
-            None
-        } else {
-            self.sent_setpoint = Some(sp);
-            Some(sp)
-        };
-        let input = Input {
-            seq: self.seq,
-            state: wire_state(state),
-            setpoint,
-        };
-        self.port.send(&Uplink::Input(input));
-        loop {
-            match self.port.recv(Duration::from_secs(10)) {
-                Some(Downlink::Telemetry(t)) if t.seq == self.seq => {
-                    self.costs.push(t.step_cost);
-                    self.last_a = t.a.iter().map(|&x| f64::from(x)).collect();
-                    self.faults_seen |= t.faults;
-                    return t.rpm.map(f64::from);
-                }
-                Some(_) => {} // status frames, stale telemetry
-                None => panic!(
-                    "no telemetry from the firmware for input {} within 10 s",
-                    self.seq
-                ),
-            }
-        }
-    }
-
-    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
-        Some(self.last_a.clone())
     }
 }
 
@@ -497,7 +240,7 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
         last_a: Vec::new(),
         faults_seen: 0,
     };
-    let log_fw = fly(&scenario, &mut fw);
+    let log_fw = fly_scenario(&scenario, &mut fw);
     fw.port.send(&Uplink::Finish);
     let report = loop {
         match fw.port.recv(Duration::from_secs(10)) {
@@ -523,7 +266,7 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
                 ),
                 dt_s,
             };
-            fly(&scenario, &mut native)
+            fly_scenario(&scenario, &mut native)
         }
         ModelKind::Learned => {
             let wp = weights_path();
@@ -542,7 +285,7 @@ fn pil_flight(law: AdaptationLaw, rate: Rate) {
                 inner: FlightController::new(model, gains),
                 dt_s,
             };
-            fly(&scenario, &mut native)
+            fly_scenario(&scenario, &mut native)
         }
     };
 

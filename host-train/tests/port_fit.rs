@@ -3,9 +3,10 @@
 //! 10 % per term, and the fitted blob's port terms round-trip through the blob.
 
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, State};
-use host_train::train::data::{RealizationInfo, Window, Windows};
-use host_train::train::port_fit::{self, PortFitConfig, Scaling};
-use host_train::train::response::{rollout, Response};
+use host_train::train::{
+    default_port_start, fit_port, port_report, response_rollout, PortFitConfig, RealizationInfo,
+    Response, Scaling, Window, Windows, PORT_FIT_PARAMS,
+};
 use nalgebra::Vector3;
 
 /// A small deterministic generator (SplitMix64).
@@ -25,7 +26,7 @@ impl Rng {
 /// The scaled truth (fit parameter order: k_f, k_τ ×3, T_f, T_τ, drag /s ×3, damping /s ×3,
 /// gyrator J⁻¹B ×9, K/J ×6).
 fn truth_params() -> Vec<f64> {
-    let mut p = vec![0.0; port_fit::FIT_PARAMS];
+    let mut p = vec![0.0; PORT_FIT_PARAMS];
     p[0] = 1.0;
     p[1..4].copy_from_slice(&[0.5, 0.4, 0.8]);
     p[4] = 0.02;
@@ -76,7 +77,7 @@ fn synthetic(truth: &LearnedModel, n: usize, seed: u64) -> Windows {
             u.push(held);
         }
         let mut states = vec![s0];
-        rollout(truth, &Response::identity(), &s0, &u, 1.0 / hz, |_, s| {
+        response_rollout(truth, &Response::identity(), &s0, &u, 1.0 / hz, |_, s| {
             states.push(*s)
         });
         assert_eq!(states.len(), len, "the truth's rollout stays finite");
@@ -117,11 +118,11 @@ fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
         iterations: 30,
         ..PortFitConfig::default()
     };
-    let (fitted, steps) = port_fit::fit(
+    let (fitted, steps) = fit_port(
         &base,
         &data,
         &ids,
-        &port_fit::default_start(&cfg.structure),
+        &default_port_start(&cfg.structure),
         &cfg,
         |_| {},
     );
@@ -170,7 +171,7 @@ fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
     let bytes = hamflight::blob::encode_model(&fitted);
     assert_eq!(LearnedModel::from_blob(&bytes), Ok(fitted));
     // And the report reads the same numbers back per axis.
-    let r = port_fit::report(&fitted);
+    let r = port_report(&fitted);
     assert!((r.torque_lag_s - 0.04).abs() < 0.004, "{}", r.torque_lag_s);
     assert!((r.drag_per_s[2] - 0.9).abs() < 0.09, "{:?}", r.drag_per_s);
 }
@@ -189,12 +190,12 @@ fn pinned_torque_gains_stay_at_the_description_and_the_rest_is_recovered() {
         ..PortFitConfig::default()
     };
     cfg.structure.torque_gains = false;
-    let start = port_fit::default_start(&cfg.structure);
+    let start = default_port_start(&cfg.structure);
     assert_eq!(
         start.torque_gain_offset, [0.0; 3],
         "pinned gains start at 1"
     );
-    let (fitted, _) = port_fit::fit(&base, &data, &ids, &start, &cfg, |_| {});
+    let (fitted, _) = fit_port(&base, &data, &ids, &start, &cfg, |_| {});
     let p_fit = scaling.to_params(fitted.port());
     for (i, k) in p_fit.iter().enumerate().take(4).skip(1) {
         assert_eq!(*k, 1.0, "torque gain {i} moved: {k}");

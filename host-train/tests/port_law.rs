@@ -8,9 +8,9 @@
 
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, PortTerms};
 use hamflight::{AdaptationLaw, Gains};
-use host_train::control::adapter::{airframe_of, gains_for, CoreController};
-use host_train::fly::eval::{self, Report};
-use host_train::pipeline::prior_check::{self, prior_of};
+use host_train::control::{airframe_of, gains_for, CoreController};
+use host_train::fly::{fly_scenario, Report};
+use host_train::pipeline::{prior_of, run_prior_check};
 use host_train::Scenario;
 use nalgebra::Vector3;
 
@@ -103,7 +103,7 @@ fn the_law_flies_the_learned_port_terms_where_the_prior_cannot() {
                 };
                 let mut c = CoreController::new("test", *m, gains);
                 c.set_airframe(airframe_of(&sc.vehicle));
-                Report::from_log(&eval::fly(&sc, &mut c), None)
+                Report::from_log(&fly_scenario(&sc, &mut c), None)
             };
             let (a, p) = (fly(&learned), fly(&prior));
             assert_eq!(
@@ -123,7 +123,7 @@ fn the_law_flies_the_learned_port_terms_where_the_prior_cannot() {
     }
     // The check that `fit-port --flight-check` runs agrees: the learned blob passes.
     let sc = scenario("spiral", &residual);
-    let check = prior_check::run(&learned, &[sc]).expect("the check runs");
+    let check = run_prior_check(&learned, &[sc]).expect("the check runs");
     assert_eq!(check.failure, None, "{:?}", check.flights);
 }
 
@@ -137,7 +137,7 @@ fn the_check_refuses_port_terms_that_fly_worse_than_the_prior() {
     wrong.torque_gain_offset = [-0.97, -0.975, -0.95];
     wrong.torque_lag_s = 0.04;
     let sc = scenario("spiral", &residual);
-    let check = prior_check::run(&model(wrong), &[sc]).expect("the check runs");
+    let check = run_prior_check(&model(wrong), &[sc]).expect("the check runs");
     let why = check.failure.expect("the wrong blob is refused");
     assert!(
         why.contains("law") && why.contains("port-law-spiral"),

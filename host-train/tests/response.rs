@@ -7,12 +7,12 @@
 mod train_common;
 
 use hamflight::model::{NominalModel, State, FEATURES, MASS_KG};
-use host_train::io::dataset::VehicleDescription;
-use host_train::pipeline::fit_response::load_response;
-use host_train::pipeline::score;
-use host_train::train::data::{Window, Windows};
-use host_train::train::response::{self, FitConfig, Response};
-use host_train::train::TrainConfig;
+use host_train::io::VehicleDescription;
+use host_train::pipeline::load_response;
+use host_train::train::{
+    fit_response, model_errors, response_errors, response_rollout, FitConfig, Response,
+    TrainConfig, Window, Windows,
+};
 use nalgebra::{Matrix3, Vector3, Vector4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -68,7 +68,7 @@ fn windows(resp: &Response, n: usize, seed: u64) -> Windows {
                 })
                 .collect();
             let mut states = vec![s0];
-            response::rollout(&model, resp, &s0, &u, dt, |_, s| states.push(*s));
+            response_rollout(&model, resp, &s0, &u, dt, |_, s| states.push(*s));
             assert_eq!(states.len(), STEPS + 1, "the truth's rollout stays finite");
             Window {
                 states,
@@ -92,11 +92,11 @@ fn windows(resp: &Response, n: usize, seed: u64) -> Windows {
 fn the_identity_response_is_the_blobs_own_prediction() {
     let data = windows(&truth(), 30, 1);
     let ids: Vec<usize> = (0..data.windows.len()).collect();
-    let own = score::model_errors(&nominal(), &data, &ids);
-    let with = response::response_errors(&nominal(), &Response::identity(), &data, &ids);
+    let own = model_errors(&nominal(), &data, &ids);
+    let with = response_errors(&nominal(), &Response::identity(), &data, &ids);
     assert_eq!(own, with);
     // ... and the truth's response predicts its own data exactly, which the blob alone does not.
-    let exact = response::response_errors(&nominal(), &truth(), &data, &ids);
+    let exact = response_errors(&nominal(), &truth(), &data, &ids);
     let last = |v: &[f64]| *v.last().expect("steps");
     assert!(last(&exact.rate_mae_rad_s) < 1e-4, "{exact:?}");
     assert!(last(&own.rate_mae_rad_s) > 0.1, "{own:?}");
@@ -117,7 +117,7 @@ fn the_fit_recovers_a_response_it_did_not_start_from() {
         ..FitConfig::default()
     };
     let mut costs = vec![];
-    let (fitted, steps) = response::fit(&nominal(), &data, &ids, &start, &cfg, |s| {
+    let (fitted, steps) = fit_response(&nominal(), &data, &ids, &start, &cfg, |s| {
         costs.push(s.cost)
     });
     assert_eq!(costs.len(), steps.len());
@@ -169,8 +169,8 @@ fn the_fit_recovers_a_response_it_did_not_start_from() {
     // On fresh windows the fitted response predicts the rates to a fraction of the blob's error.
     let fresh = windows(&truth, 40, 3);
     let fids: Vec<usize> = (0..fresh.windows.len()).collect();
-    let blob = response::response_errors(&nominal(), &Response::identity(), &fresh, &fids);
-    let fit = response::response_errors(&nominal(), &fitted, &fresh, &fids);
+    let blob = response_errors(&nominal(), &Response::identity(), &fresh, &fids);
+    let fit = response_errors(&nominal(), &fitted, &fresh, &fids);
     let at = |v: &[f64]| *v.last().expect("steps");
     assert!(
         at(&fit.rate_mae_rad_s) < 0.02 * at(&blob.rate_mae_rad_s),
@@ -223,15 +223,15 @@ fn a_pinned_rigid_body_keeps_j_and_g_at_the_prior() {
         flight_rotor_gains: true,
         ..cfg.clone()
     };
-    let e = host_train::pipeline::train::run(&with_rotor_gains, &dir, &out, true)
+    let e = host_train::pipeline::run_train(&with_rotor_gains, &dir, &out, true)
         .expect_err("pinned rotation with per-flight rotor gains is refused");
     assert!(
         format!("{e:#}").contains("--no-flight-rotor-gains"),
         "{e:#}"
     );
     assert!(!out.exists(), "nothing written");
-    host_train::pipeline::train::run(&cfg, &dir, &out, true).expect("trains");
-    let model = host_train::control::adapter::load_learned(&out).expect("blob");
+    host_train::pipeline::run_train(&cfg, &dir, &out, true).expect("trains");
+    let model = host_train::control::load_learned(&out).expect("blob");
     let prior = hamflight::model::ModelWeights::prior();
     for rot in [
         Matrix3::identity(),

@@ -6,8 +6,8 @@
 mod train_common;
 
 use hamflight::model::{LearnedModel, NominalModel, FEATURES, MASS_KG};
-use host_train::pipeline::score::{self, ScoreArgs};
-use host_train::train::{data, TrainConfig};
+use host_train::pipeline::{run_score, score_table, ScoreArgs};
+use host_train::train::{load_windows, model_errors, split_windows, TrainConfig};
 use nalgebra::{Matrix3, Vector3};
 
 fn close(a: &[f64], b: &[f64], what: &str) {
@@ -37,13 +37,13 @@ fn score_reproduces_the_training_reports_heldout_errors() {
         ..TrainConfig::default()
     };
     let out = dir.join("s.hfw");
-    let report = host_train::pipeline::train::run(&cfg, &dir, &out, true).expect("trains");
+    let report = host_train::pipeline::run_train(&cfg, &dir, &out, true).expect("trains");
 
     // The report's held-out windows, rebuilt as `train` cuts and splits them.
-    let windows = data::load(&dir, cfg.window).expect("loads");
-    let (_, heldout) = data::split(&windows, cfg.heldout_frac, cfg.seed);
-    let learned: LearnedModel = host_train::control::adapter::load_learned(&out).expect("blob");
-    let e = score::model_errors(&learned, &windows, &heldout);
+    let windows = load_windows(&dir, cfg.window).expect("loads");
+    let (_, heldout) = split_windows(&windows, cfg.heldout_frac, cfg.seed);
+    let learned: LearnedModel = host_train::control::load_learned(&out).expect("blob");
+    let e = model_errors(&learned, &windows, &heldout);
     let r = &report.heldout_learned_no_disturbance;
     close(&e.pos_rmse_m, &r.pos_m, "position");
     close(&e.att_rmse_rad, &r.rot_rad, "attitude");
@@ -72,7 +72,7 @@ fn score_reproduces_the_training_reports_heldout_errors() {
         response: None,
         history_s: None,
     };
-    let s = score::run(&args).expect("scores");
+    let s = run_score(&args).expect("scores");
     assert_eq!(s.windows, windows.windows.len());
     let row = |n: &str| &s.predictors.iter().find(|p| p.name == n).expect(n).errors;
     let last = |v: &[f64]| *v.last().expect("steps");
@@ -97,6 +97,6 @@ fn score_reproduces_the_training_reports_heldout_errors() {
     assert!(json.contains("\"logged_velocity_pos_mae_m\""));
     let svg = std::fs::read_to_string(dir.join("score").join("score.svg")).expect("svg");
     assert!(svg.starts_with("<svg"));
-    print!("{}", score::table(&s));
-    assert!(score::table(&s).contains("zero-order"));
+    print!("{}", score_table(&s));
+    assert!(score_table(&s).contains("zero-order"));
 }

@@ -8,10 +8,8 @@
 //! Run in release: `cargo test --release -p host-train --test sensor_chain`.
 
 use hamflight::Gains;
-use host_train::control::adapter::CoreController;
-use host_train::control::{adapter, registry};
-use host_train::fly::eval::{self, Report};
-use host_train::fly::margins::{self, LoopPoint};
+use host_train::control::{load_learned, CoreController, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, margins_of, measure_point, LoopPoint, Report};
 
 mod flight_common;
 use flight_common::{fly, repo, scenario};
@@ -101,14 +99,14 @@ fn the_estimator_is_biased_by_a_steady_force_and_the_vehicle_sits_at_that_bias()
 #[test]
 fn without_the_velocity_consistency_the_biased_estimate_costs_several_times_the_bias() {
     let sc = scenario("cf-hover-wind");
-    let model = adapter::load_learned(&repo(registry::DEFAULT_WEIGHTS)).expect("blob");
+    let model = load_learned(&repo(DEFAULT_WEIGHTS)).expect("blob");
     let facts = hamflight::VehicleFacts::of(&model);
     let gains = Gains {
         velocity_consistency_tau_s: 0.0,
         ..Gains::for_vehicle(&facts)
     };
     let mut ctrl = CoreController::new("adaptive", model, gains);
-    let log = eval::fly(&sc, &mut ctrl);
+    let log = fly_scenario(&sc, &mut ctrl);
     let r = Report::from_flight(&log, &sc, None);
     let (err, bias) = (horizontal(r.pos_err_mean_m), horizontal(r.est_pos_bias_m));
     // measured 14.8 cm against a 2.0 cm bias
@@ -125,7 +123,7 @@ fn without_the_velocity_consistency_the_biased_estimate_costs_several_times_the_
 #[test]
 fn attitude_margins_with_the_chain_and_a_70_ms_lag() {
     let sc = scenario("cf-hover-lag70");
-    let model = adapter::load_learned(&repo(registry::DEFAULT_WEIGHTS)).expect("blob");
+    let model = load_learned(&repo(DEFAULT_WEIGHTS)).expect("blob");
     let facts = hamflight::VehicleFacts {
         motor_tau_s: 0.07,
         ..hamflight::VehicleFacts::of(&model)
@@ -146,7 +144,7 @@ fn attitude_margins_with_the_chain_and_a_70_ms_lag() {
             .default_frequencies_hz()
             .into_iter()
             .map(|f| {
-                margins::measure_point(
+                measure_point(
                     &sc,
                     &mut ctrl,
                     LoopPoint::Roll,
@@ -155,7 +153,7 @@ fn attitude_margins_with_the_chain_and_a_70_ms_lag() {
                 )
             })
             .collect();
-        let m = margins::margins_of(sweep);
+        let m = margins_of(sweep);
         let pm = m.phase_margin_deg.expect("a gain crossover");
         let gm = m.gain_margin_db.expect("a phase crossover");
         assert!(

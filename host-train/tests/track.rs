@@ -1,7 +1,7 @@
 //! `host-train track`: both adaptation laws' estimates against the true wind on gust-spiral,
 //! with the figure and the report written.
 
-use host_train::fly::track::{run_track, TrackArgs};
+use host_train::fly::{run_track, TrackArgs};
 use std::path::Path;
 
 #[test]

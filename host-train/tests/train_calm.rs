@@ -9,9 +9,9 @@
 //! Run in release: `cargo test --release -p host-train --test train_calm`.
 
 use hamflight::model::HamiltonianModel;
-use host_train::control::{adapter, registry};
-use host_train::fly::eval::{self, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{by_name, load_learned, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
 use std::path::{Path, PathBuf};
 
 fn repo(path: &str) -> PathBuf {
@@ -19,9 +19,9 @@ fn repo(path: &str) -> PathBuf {
 }
 
 fn fly(name: &str, sc: &Scenario) -> Report {
-    let w = repo(registry::DEFAULT_WEIGHTS);
-    let mut ctrl = registry::by_name(name, sc, Some(&w)).expect("controller exists");
-    let log = eval::fly(sc, ctrl.as_mut());
+    let w = repo(DEFAULT_WEIGHTS);
+    let mut ctrl = by_name(name, sc, Some(&w)).expect("controller exists");
+    let log = fly_scenario(sc, ctrl.as_mut());
     Report::from_log(&log, None)
 }
 
@@ -79,8 +79,7 @@ fn learned_is_within_1_5x_of_nominal_in_calm_air_with_state_noise() {
 
 #[test]
 fn shipped_thrust_gain_holds_no_average_thrust_deficit() {
-    let model =
-        adapter::load_learned(&repo(registry::DEFAULT_WEIGHTS)).expect("shipped weights load");
+    let model = load_learned(&repo(DEFAULT_WEIGHTS)).expect("shipped weights load");
     let g_f = model.terms(&hamflight::State::default()).gain[(2, 0)];
     println!("learned thrust gain at hover: {g_f:.5}");
     // measured 1.00004 (0.99729 without the per-flight rotor gains; 0.97999 before the calm

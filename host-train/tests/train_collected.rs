@@ -2,8 +2,8 @@
 //! Sec. 4, scaled down) lowers the held-out loss by a large factor. Run in release:
 //! `cargo test --release -p host-train --test train_collected`.
 
-use host_train::data::collect::{CollectArgs, CollectConfig};
-use host_train::pipeline::train::run;
+use host_train::data::{CollectArgs, CollectConfig};
+use host_train::pipeline::run_train;
 use host_train::train::TrainConfig;
 
 #[test]
@@ -18,14 +18,14 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
             ..CollectConfig::default()
         },
     };
-    host_train::data::collect::run(&args).expect("collect");
+    host_train::data::run_collect(&args).expect("collect");
     let cfg = TrainConfig {
         epochs: 15,
         batch: 64,
         ..TrainConfig::default()
     };
     let out = dir.join("small.hfw");
-    let r = run(&cfg, &dir, &out, true).expect("train");
+    let r = run_train(&cfg, &dir, &out, true).expect("train");
     eprintln!(
         "held-out loss {:.3e} -> {:.3e} ({:.1} s)",
         r.initial_val_loss, r.final_val_loss, r.train_time_s

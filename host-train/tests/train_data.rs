@@ -6,9 +6,8 @@
 mod train_common;
 
 use hamflight::model::{NominalModel, FEATURES};
-use host_train::io::dataset::WindowSpec;
-use host_train::train::data;
-use host_train::train::export::prediction_errors;
+use host_train::io::WindowSpec;
+use host_train::train::{batch_windows, load_windows, prediction_errors};
 
 #[test]
 fn each_step_is_integrated_with_its_own_command() {
@@ -16,12 +15,12 @@ fn each_step_is_integrated_with_its_own_command() {
     let a: Vec<[f32; FEATURES]> = vec![[0.3, -0.2, 0.0, 0.1, 0.0, 0.0]];
     let dir = train_common::scratch("steps");
     train_common::write_dataset_with(&dir, &model, &a, 40, 3, true);
-    let w = data::load(&dir, WindowSpec::default()).unwrap();
+    let w = load_windows(&dir, WindowSpec::default()).unwrap();
     assert_eq!(w.windows.len(), 40);
     assert_eq!(w.window_len, 5);
     assert!(w.windows.iter().all(|x| x.u.len() == 4 && x.u[1] != x.u[0]));
     let ids: Vec<usize> = (0..w.windows.len()).collect();
-    let b = data::batch(&w, &ids, &burn::tensor::Device::flex());
+    let b = batch_windows(&w, &ids, &burn::tensor::Device::flex());
     assert_eq!(b.u.len(), 4);
     let exact = prediction_errors(&model, &w, &ids, Some(&a));
     // The same windows with the first command held over all four steps.

@@ -6,7 +6,7 @@
 mod train_common;
 
 use hamflight::model::{NominalModel, FEATURES, MASS_KG};
-use host_train::pipeline::train::run;
+use host_train::pipeline::run_train;
 use host_train::train::TrainConfig;
 use nalgebra::{Matrix3, Vector3};
 
@@ -30,7 +30,7 @@ fn nominal_data_is_fit_and_j_g_recovered() {
         ..TrainConfig::default()
     };
     let out = dir.join("fit.hfw");
-    let report = run(&cfg, &dir, &out, true).expect("training runs");
+    let report = run_train(&cfg, &dir, &out, true).expect("training runs");
     eprintln!(
         "val loss {:.3e} -> {:.3e} in {:.1} s",
         report.initial_val_loss, report.final_val_loss, report.train_time_s

@@ -5,8 +5,7 @@ mod train_common;
 
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, State, FEATURES};
-use host_train::train::epochs::init_weights;
-use host_train::train::tensor_model::{to_vec, Consts, Forcing, TModel};
+use host_train::train::{init_weights, tensor_to_vec, Consts, Forcing, TModel};
 use nalgebra::Vector4;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -118,8 +117,8 @@ fn core_and_host_models_agree_at(n: usize) {
     let forcing = Forcing::new(&c, u.clone(), a_all, idx);
 
     // J⁻¹, g, W.
-    let jinv_h = to_vec(&host.inertia_inv(&c, &rot).jinv);
-    let w_h = to_vec(&host.features(&c, &rot));
+    let jinv_h = tensor_to_vec(&host.inertia_inv(&c, &rot).jinv);
+    let w_h = tensor_to_vec(&host.features(&c, &rot));
     let mut jinv_c = Vec::new();
     let mut w_c = Vec::new();
     for s in &states {
@@ -136,7 +135,7 @@ fn core_and_host_models_agree_at(n: usize) {
 
     // g u (both columns scales at once: the control wrench of random controls).
     let (fu, tu) = host.control_wrench(&c, &rot, forcing.u_norm.clone());
-    let (fu, tu) = (to_vec(&fu), to_vec(&tu));
+    let (fu, tu) = (tensor_to_vec(&fu), tensor_to_vec(&tu));
     for (i, (s, uu)) in states.iter().zip(&us).enumerate() {
         let gu = core.terms(s).gain * uu;
         let fh = &fu[3 * i..3 * i + 3];
@@ -164,7 +163,7 @@ fn core_and_host_models_agree_at(n: usize) {
                 &device,
             );
         let (f, t) = host.control_wrench(&c, &rot, un);
-        let (f, t) = (to_vec(&f), to_vec(&t));
+        let (f, t) = (tensor_to_vec(&f), tensor_to_vec(&t));
         for (i, s) in states.iter().enumerate() {
             let col = core.terms(s).gain.column(k) * hamflight::model::learned::CONTROL_SCALE[k];
             let h: Vec<f32> = f[3 * i..3 * i + 3]
@@ -178,7 +177,12 @@ fn core_and_host_models_agree_at(n: usize) {
 
     // The state derivative, including ∂H/∂rᵢ (VJP) and d/dt J⁻¹ (JVP).
     let (pd, rd, vd, wd) = host.state_derivative(&c, p, rot, v, om, &forcing);
-    let (pd, rd, vd, wd) = (to_vec(&pd), to_vec(&rd), to_vec(&vd), to_vec(&wd));
+    let (pd, rd, vd, wd) = (
+        tensor_to_vec(&pd),
+        tensor_to_vec(&rd),
+        tensor_to_vec(&vd),
+        tensor_to_vec(&wd),
+    );
     let (mut pc, mut rc, mut vc, mut wc) = (vec![], vec![], vec![], vec![]);
     for ((s, uu), aj) in states.iter().zip(&us).zip(&a) {
         let d = core.dynamics(s, uu, aj);
@@ -204,10 +208,11 @@ fn host_network_jacobians_match_finite_differences() {
     let dy: Vec<f32> = (0..6).map(|_| rng.gen_range(-1.0..1.0)).collect();
     let xt = tensor2(x.clone(), [1, 9], &device);
     let tr = host.inertia.forward(xt);
-    let jvp = to_vec(&host.inertia.jvp(&tr, tensor2(dx.clone(), [1, 9], &device)));
-    let vjp = to_vec(&host.inertia.vjp(&tr, tensor2(dy.clone(), [1, 6], &device)));
+    let jvp = tensor_to_vec(&host.inertia.jvp(&tr, tensor2(dx.clone(), [1, 9], &device)));
+    let vjp = tensor_to_vec(&host.inertia.vjp(&tr, tensor2(dy.clone(), [1, 6], &device)));
     let h = 1e-2f32;
-    let f = |x: &[f32]| to_vec(&host.inertia.forward(tensor2(x.to_vec(), [1, 9], &device)).y);
+    let f =
+        |x: &[f32]| tensor_to_vec(&host.inertia.forward(tensor2(x.to_vec(), [1, 9], &device)).y);
     let shift = |s: f32| {
         x.iter()
             .zip(&dx)
@@ -247,8 +252,9 @@ fn host_network_jacobians_match_finite_differences() {
 /// (fused heads) and a large one (heads apart).
 #[test]
 fn fast_training_loss_matches_the_reference_ops() {
-    use host_train::train::data::{self, RealizationInfo, Window, Windows};
-    use host_train::train::loss::{batch_loss, batch_loss_reference};
+    use host_train::train::{
+        batch_loss, batch_loss_reference, batch_windows, RealizationInfo, Window, Windows,
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let n_real = 3;
     let windows: Vec<Window> = (0..1100)
@@ -289,7 +295,7 @@ fn fast_training_loss_matches_the_reference_ops() {
     }
     for n in [64usize, 1100] {
         let ids: Vec<usize> = (0..n).collect();
-        let b = data::batch(&data, &ids, &ad);
+        let b = batch_windows(&data, &ids, &ad);
         let run = |reference: bool| {
             let mut leaves = TModel::from_core(&w, &ad).tensors();
             leaves.push(tensor2(a.clone(), [n_real, FEATURES], &ad));
@@ -304,9 +310,13 @@ fn fast_training_loss_matches_the_reference_ops() {
             let grads = loss.backward();
             let g: Vec<Vec<f32>> = leaves
                 .iter()
-                .map(|l| l.grad(&grads).map(|g| to_vec(&g)).unwrap_or_default())
+                .map(|l| {
+                    l.grad(&grads)
+                        .map(|g| tensor_to_vec(&g))
+                        .unwrap_or_default()
+                })
                 .collect();
-            (to_vec(&loss.inner())[0], g)
+            (tensor_to_vec(&loss.inner())[0], g)
         };
         let (l_fast, g_fast) = run(false);
         let (l_ref, g_ref) = run(true);
@@ -327,9 +337,8 @@ fn fast_training_loss_matches_the_reference_ops() {
 /// size) gives the whole minibatch's loss and gradients, on collected data.
 #[test]
 fn split_minibatch_gradients_equal_the_whole_batch() {
-    use host_train::data::collect::{collect, CollectConfig};
-    use host_train::train::epochs::initial_gradients;
-    use host_train::train::{data, TrainConfig};
+    use host_train::data::{collect_dataset, CollectConfig};
+    use host_train::train::{initial_gradients, load_windows, TrainConfig};
     let dir = train_common::scratch("split-grads");
     let cc = CollectConfig {
         realizations: 2,
@@ -337,9 +346,9 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
         poses: 2,
         ..CollectConfig::default()
     };
-    collect(&dir, &cc).expect("collect");
+    collect_dataset(&dir, &cc).expect("collect");
     let cfg = TrainConfig::default();
-    let windows = data::load(&dir, cfg.window).expect("load");
+    let windows = load_windows(&dir, cfg.window).expect("load");
     let ids: Vec<usize> = (0..windows.windows.len()).collect();
     assert!(ids.len() >= 256, "{} windows", ids.len());
     let (l_split, g_split) = initial_gradients(&cfg, &windows, &ids, true);
@@ -362,10 +371,8 @@ fn split_minibatch_gradients_equal_the_whole_batch() {
 /// so that the W head and every term of the rotor gains' path carry a gradient).
 #[test]
 fn fused_kernel_gradients_equal_burns() {
-    use host_train::data::collect::{collect, CollectConfig};
-    use host_train::train::epochs::{gradients_at, initial_params};
-    use host_train::train::fused::Isa;
-    use host_train::train::{data, TrainConfig};
+    use host_train::data::{collect_dataset, CollectConfig};
+    use host_train::train::{gradients_at, initial_params, load_windows, Isa, TrainConfig};
     let dir = train_common::scratch("fused-grads");
     let cc = CollectConfig {
         realizations: 2,
@@ -373,18 +380,18 @@ fn fused_kernel_gradients_equal_burns() {
         poses: 2,
         ..CollectConfig::default()
     };
-    collect(&dir, &cc).expect("collect");
+    collect_dataset(&dir, &cc).expect("collect");
     // The paper's windows of 5 states with and without rotor gains, and windows of 3 states.
     for (rotor_gains, len) in [(false, 5), (true, 5), (true, 3)] {
         let cfg = TrainConfig {
             flight_rotor_gains: rotor_gains,
-            window: host_train::io::dataset::WindowSpec {
+            window: host_train::io::WindowSpec {
                 len,
                 ..Default::default()
             },
             ..TrainConfig::default()
         };
-        let windows = data::load(&dir, cfg.window).expect("load");
+        let windows = load_windows(&dir, cfg.window).expect("load");
         // Not a multiple of the kernel's 8 lanes: the padding lanes must not count.
         let ids: Vec<usize> = (0..windows.windows.len().min(101)).collect();
         assert_eq!(ids.len(), 101);

@@ -8,13 +8,15 @@
 
 use std::path::{Path, PathBuf};
 
-use host_train::control::registry;
-use host_train::data::import::realize_commands;
-use host_train::fly::eval::{self, Report};
-use host_train::io::dataset::{self, Sample};
-use host_train::pipeline::vehicle_study::{self, StudyReport, VehicleStudyArgs};
-use host_train::sim::plant::{Disturbance, Effects, Plant, PlantState, VehicleParams};
-use host_train::sim::scenario::Scenario;
+use host_train::control::core_by_name;
+use host_train::data::realize_commands;
+use host_train::fly::{fly_scenario, Report};
+use host_train::io::{load_dataset, load_dataset_manifest, Sample};
+use host_train::pipeline::{
+    logging_controller, run_vehicle_study, vehicle_study_table, StudyReport, VehicleStudyArgs,
+    TRUE_COMPOSITE,
+};
+use host_train::sim::{Disturbance, Effects, Plant, PlantState, Scenario, VehicleParams};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -192,8 +194,8 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
         flight_s: 8.0,
         ..VehicleStudyArgs::new(&out)
     };
-    let r = vehicle_study::run(&args).unwrap();
-    println!("{}", vehicle_study::table(&r));
+    let r = run_vehicle_study(&args).unwrap();
+    println!("{}", vehicle_study_table(&r));
     let (calm, windy) = (r.scenarios[0].clone(), r.scenarios[1].clone());
 
     // Nothing crashes.
@@ -202,7 +204,7 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     }
 
     // The import recorded the vehicle, and the training report's true values are its.
-    let m = dataset::load_manifest(&out.join("data")).unwrap();
+    let m = load_dataset_manifest(&out.join("data")).unwrap();
     assert_eq!(m.mass_kg, 0.034);
     assert_eq!(m.vehicle.motor_tau_s, Some(0.02));
     assert_eq!(m.vehicle.inertia_kg_m2, Some(r.vehicle.inertia_kg_m2));
@@ -211,7 +213,7 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
         m.realizations.iter().filter(|x| x.disturbance_free).count(),
         3
     );
-    let m0 = dataset::load_manifest(&out.join("data-no-lag")).unwrap();
+    let m0 = load_dataset_manifest(&out.join("data-no-lag")).unwrap();
     assert_eq!(m0.vehicle.motor_tau_s, None);
     let rep: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("seed-0.hfw.json")).unwrap()).unwrap();
@@ -307,8 +309,8 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     let mut clean = scenario("mismatch-calm-spiral");
     clean.spec.effects.noise = Default::default();
     let fly = |key: &str, blob: Option<&Path>| {
-        let mut c = registry::core_by_name(key, blob).unwrap();
-        let r = Report::from_log(&eval::fly(&clean, c.as_mut()), None);
+        let mut c = core_by_name(key, blob).unwrap();
+        let r = Report::from_log(&fly_scenario(&clean, c.as_mut()), None);
         assert!(!r.crashed, "{key} crashed on the noise-free calm spiral");
         r.rmse_pos_window_m.unwrap()
     };
@@ -326,10 +328,10 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
 }
 
 /// Learned + composite within 5 % of the composite law on the nominal model told the truth
-/// ([`vehicle_study::TRUE_COMPOSITE`]) on each of `scenarios`, for every seed.
+/// ([`TRUE_COMPOSITE`]) on each of `scenarios`, for every seed.
 fn assert_floor(r: &StudyReport, vehicle: &str, scenarios: &[String]) {
     for sc in scenarios {
-        let floor = one(r, vehicle_study::TRUE_COMPOSITE, sc);
+        let floor = one(r, TRUE_COMPOSITE, sc);
         for (seed, l) in rmse(r, "adaptive-composite", sc).into_iter().enumerate() {
             assert!(
                 l <= 1.05 * floor,
@@ -339,14 +341,14 @@ fn assert_floor(r: &StudyReport, vehicle: &str, scenarios: &[String]) {
     }
 }
 
-fn import_args(out: &Path, log: &Path) -> host_train::data::import::ImportArgs {
-    host_train::data::import::ImportArgs {
+fn import_args(out: &Path, log: &Path) -> host_train::data::ImportArgs {
+    host_train::data::ImportArgs {
         logs: vec![log.to_path_buf()],
         gravity_m_s2: Some(9.8),
         inertia_kg_m2: Some(vec![1.82e-5, 1.82e-5, 2.821e-5]),
         rotor_efficiency: Some(vec![1.0, 1.0, 0.9, 1.0]),
         motor_tau_s: Some(0.02),
-        ..host_train::data::import::ImportArgs::new(out.to_path_buf(), 0.034)
+        ..host_train::data::ImportArgs::new(out.to_path_buf(), 0.034)
     }
 }
 
@@ -355,18 +357,18 @@ fn import_records_the_vehicle_and_checks_its_flags() {
     let dir = tmpdir("import");
     let mut sc = scenario("mismatch-calm-spiral");
     sc.spec.duration_s = 3.0;
-    let mut lee = host_train::control::registry::baseline_by_name("geometric", &sc).unwrap();
-    let mut rec = host_train::fly::usdrecord::UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
-    assert!(host_train::fly::eval::fly(&sc, &mut rec)
+    let mut lee = host_train::control::baseline_by_name("geometric", &sc).unwrap();
+    let mut rec = host_train::fly::UsdRecorder::new(lee.as_mut(), sc.vehicle.clone());
+    assert!(host_train::fly::fly_scenario(&sc, &mut rec)
         .crash_time_s
         .is_none());
     let log = dir.join("heavy.bin");
     rec.write(&log).unwrap();
 
-    let bad = |f: &dyn Fn(&mut host_train::data::import::ImportArgs), flag: &str| {
+    let bad = |f: &dyn Fn(&mut host_train::data::ImportArgs), flag: &str| {
         let mut a = import_args(&dir.join("bad"), &log);
         f(&mut a);
-        let e = format!("{:#}", host_train::data::import::run(&a).unwrap_err());
+        let e = format!("{:#}", host_train::data::run_import(&a).unwrap_err());
         assert!(e.contains(flag), "{flag}: {e}");
         assert!(!dir.join("bad").join("manifest.json").exists());
     };
@@ -386,15 +388,15 @@ fn import_records_the_vehicle_and_checks_its_flags() {
     bad(&|a| a.motor_tau_s = Some(f64::NAN), "--motor-tau-s");
 
     let realized = dir.join("realized");
-    host_train::data::import::run(&import_args(&realized, &log)).unwrap();
+    host_train::data::run_import(&import_args(&realized, &log)).unwrap();
     let logged = dir.join("logged");
-    host_train::data::import::run(&host_train::data::import::ImportArgs {
+    host_train::data::run_import(&host_train::data::ImportArgs {
         motor_tau_s: None,
         ..import_args(&logged, &log)
     })
     .unwrap();
-    let r = dataset::load(&realized).unwrap();
-    let l = dataset::load(&logged).unwrap();
+    let r = load_dataset(&realized).unwrap();
+    let l = load_dataset(&logged).unwrap();
     assert_eq!(r.manifest.vehicle.motor_tau_s, Some(0.02));
     assert_eq!(l.manifest.vehicle.motor_tau_s, None);
     assert_eq!(
@@ -430,7 +432,7 @@ fn import_records_the_vehicle_and_checks_its_flags() {
 /// (seed 0 on main e9d21b8: 0.86–0.95×; asym's rotor loss with seed 2 is 1.003×).
 #[test]
 fn light_and_asym_vehicles_learn_and_fly_both_laws() {
-    use host_train::control::baselines::Geometric;
+    use host_train::control::Geometric;
     for vehicle in ["light", "asym"] {
         let out = tmpdir(vehicle);
         // Every asym seed: its rotor loss was where a learned split of J and g cost most.
@@ -441,8 +443,8 @@ fn light_and_asym_vehicles_learn_and_fly_both_laws() {
             vehicle: vehicle.into(),
             ..VehicleStudyArgs::new(&out)
         };
-        let r = vehicle_study::run(&args).unwrap_or_else(|e| panic!("{vehicle}: {e:#}"));
-        println!("{}", vehicle_study::table(&r));
+        let r = run_vehicle_study(&args).unwrap_or_else(|e| panic!("{vehicle}: {e:#}"));
+        println!("{}", vehicle_study_table(&r));
         assert_eq!(r.scenarios.len(), 3);
         for f in &r.flights {
             let adaptive = f.controller.contains("adaptive");
@@ -471,18 +473,18 @@ fn light_and_asym_vehicles_learn_and_fly_both_laws() {
     // 20 ms gets no lead (the same controller as `Geometric::new`, bit for bit).
     let mut light = scenario("light-calm-spiral");
     light.spec.duration_s = 4.0;
-    let plain = host_train::fly::eval::fly(&light, &mut Geometric::new(light.vehicle.clone()));
+    let plain = host_train::fly::fly_scenario(&light, &mut Geometric::new(light.vehicle.clone()));
     assert!(plain.crash_time_s.is_some(), "light without the lead flew");
-    let led = host_train::fly::eval::fly(&light, &mut vehicle_study::logging_controller(&light));
+    let led = host_train::fly::fly_scenario(&light, &mut logging_controller(&light));
     assert!(led.crash_time_s.is_none(), "light with the lead crashed");
     let mut heavy = scenario("mismatch-calm-spiral");
     heavy.spec.duration_s = 2.0;
-    let a = host_train::fly::eval::Report::from_log(
-        &host_train::fly::eval::fly(&heavy, &mut Geometric::new(heavy.vehicle.clone())),
+    let a = host_train::fly::Report::from_log(
+        &host_train::fly::fly_scenario(&heavy, &mut Geometric::new(heavy.vehicle.clone())),
         None,
     );
-    let b = host_train::fly::eval::Report::from_log(
-        &host_train::fly::eval::fly(&heavy, &mut vehicle_study::logging_controller(&heavy)),
+    let b = host_train::fly::Report::from_log(
+        &host_train::fly::fly_scenario(&heavy, &mut logging_controller(&heavy)),
         None,
     );
     assert_eq!(a.rmse_pos_m, b.rmse_pos_m);

@@ -192,7 +192,7 @@ pub fn named(name: &str, weights: Option<&Bound<'_, PyAny>>) -> PyResult<(AnyMod
 /// The names [`named`] knows: the host registry's core controllers
 /// ([`ControllerSpec::ALL`]).
 pub fn core_names() -> Vec<&'static str> {
-    host_train::control::spec::core_names()
+    host_train::control::core_names()
 }
 
 /// A setpoint: desired position and its derivatives (world frame) and yaw.

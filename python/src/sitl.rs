@@ -4,11 +4,9 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use host_train::control::adapter::CoreController;
-use host_train::control::controller::Controller as HostController;
-use host_train::control::registry;
-use host_train::fly::eval::{self, FlightLog, Report};
-use host_train::sim::scenario::{Scenario as HostScenario, ScenarioSpec};
+use host_train::control::{Controller as HostController, CoreController};
+use host_train::fly::{fly_scenario, FlightLog, Report};
+use host_train::sim::{Scenario as HostScenario, ScenarioSpec};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -137,12 +135,12 @@ enum Pilot {
 /// One flight, without the GIL.
 fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> {
     let mut ctrl: Box<dyn HostController> = match pilot {
-        Pilot::Baseline(name) => host_train::control::registry::baseline_by_name(name, scenario)?,
+        Pilot::Baseline(name) => host_train::control::baseline_by_name(name, scenario)?,
         Pilot::Core(name, model, gains) => {
             Box::new(CoreController::new(name, model.clone(), **gains))
         }
     };
-    Ok(eval::fly(scenario, ctrl.as_mut()))
+    Ok(fly_scenario(scenario, ctrl.as_mut()))
 }
 
 /// A flown flight: the log as numpy arrays and the scores of `report.json`.
@@ -258,10 +256,10 @@ pub fn fly(
     result(py, &log, &sc)
 }
 
-/// The registry's names, with a line each ([`registry::controllers`]).
+/// The registry's names, with a line each ([`host_train::control::controllers`]).
 #[pyfunction]
 pub fn controllers() -> Vec<(String, String)> {
-    registry::controllers()
+    host_train::control::controllers()
         .map(|(n, d)| (n.to_string(), d.to_string()))
         .collect()
 }
@@ -269,8 +267,8 @@ pub fn controllers() -> Vec<(String, String)> {
 #[derive(Parser)]
 #[command(name = "host-train")]
 enum Tool {
-    Collect(host_train::data::collect::CollectArgs),
-    Import(host_train::data::import::ImportArgs),
+    Collect(host_train::data::CollectArgs),
+    Import(host_train::data::ImportArgs),
     Train(host_train::train::TrainArgs),
 }
 
@@ -283,9 +281,9 @@ pub fn run_tool(py: Python<'_>, command: &str, argv: Vec<String>) -> PyResult<St
     let tool = Tool::try_parse_from(&full).map_err(|e| PyValueError::new_err(e.to_string()))?;
     py.detach(|| -> anyhow::Result<String> {
         Ok(match tool {
-            Tool::Collect(a) => serde_json::to_string(&host_train::data::collect::run(&a)?)?,
-            Tool::Import(a) => serde_json::to_string(&host_train::data::import::run(&a)?)?,
-            Tool::Train(a) => serde_json::to_string(&host_train::pipeline::train::run_cli(&a)?)?,
+            Tool::Collect(a) => serde_json::to_string(&host_train::data::run_collect(&a)?)?,
+            Tool::Import(a) => serde_json::to_string(&host_train::data::run_import(&a)?)?,
+            Tool::Train(a) => serde_json::to_string(&host_train::pipeline::run_train_cli(&a)?)?,
         })
     })
     .map_err(err)

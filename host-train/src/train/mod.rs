@@ -2,6 +2,20 @@
 //! Problem 1, Sec. 3): J⁻¹(q) and g(q) (θ), W(q, 𝔭) (φ) and one a_j per disturbance
 //! realization, by RK4 through each window and Adam on the TSE(3) loss ℓ_p + ℓ_R + ℓ_ζ.
 //!
+//! Front door: code outside `host-train/src` imports these from here, never from a submodule
+//! (`tools/front-door.py` checks it): [`fit`], [`TrainConfig`], [`TrainArgs`], [`TrainReport`];
+//! the windows' [`load_windows`], [`split_windows`], [`batch_windows`] (`data::{load, split,
+//! batch}`), [`Window`], [`Windows`], [`RealizationInfo`]; [`init_weights`], [`initial_params`],
+//! [`initial_gradients`], [`gradients_at`], [`batch_loss`], [`batch_loss_reference`];
+//! [`prediction_errors`], [`model_errors`]; [`backoff_candidates`] (`backoff::candidates`);
+//! [`compare_blackbox`] (`blackbox::compare`), [`Errors`], [`BB_HIDDEN`]; the measured-input
+//! response's [`fit_response`] (`response::fit`), [`response_rollout`] (`response::rollout`),
+//! [`response_errors`], [`Response`], [`FitConfig`]; the port fit's [`fit_port`],
+//! [`port_report`], [`default_port_start`], [`PORT_FIT_PARAMS`] (`port_fit::{fit, report,
+//! default_start, FIT_PARAMS}`), [`PortFitConfig`], [`Scaling`]; the tensor model's [`TModel`],
+//! [`Consts`], [`Forcing`], [`tensor_to_vec`] (`tensor_model::to_vec`); the fused kernel's
+//! [`Isa`].
+//!
 //! - [`data`]: the dataset's windows as tensors, the held-out split;
 //! - [`tensor_model`]: the networks and paper eq. 1–2 as batched burn tensor ops (flex +
 //!   autodiff);
@@ -51,6 +65,28 @@ use serde::Serialize;
 use std::path::Path;
 
 pub use export::TrainReport;
+
+// The layer's front door: what code outside host-train/src uses, by these names.
+pub use backoff::candidates as backoff_candidates;
+pub use blackbox::{compare as compare_blackbox, Errors, BB_HIDDEN};
+pub use data::{
+    batch as batch_windows, load as load_windows, split as split_windows, RealizationInfo, Window,
+    Windows,
+};
+pub use epochs::{gradients_at, initial_gradients, initial_params};
+pub use export::prediction_errors;
+pub use fused::Isa;
+pub use init::init_weights;
+pub use loss::{batch_loss, batch_loss_reference};
+pub use port_fit::{
+    default_start as default_port_start, fit as fit_port, report as port_report, PortFitConfig,
+    Scaling, FIT_PARAMS as PORT_FIT_PARAMS,
+};
+pub use predict::model_errors;
+pub use response::{
+    fit as fit_response, response_errors, rollout as response_rollout, FitConfig, Response,
+};
+pub use tensor_model::{to_vec as tensor_to_vec, Consts, Forcing, TModel};
 
 /// Where the training loss's gradient comes from. Recorded in [`TrainConfig::gradient`] and so in
 /// the training report.

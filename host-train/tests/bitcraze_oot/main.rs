@@ -14,12 +14,9 @@ use hamflight::mixer::Airframe;
 use hamflight::model::LearnedModel;
 use hamflight::{Gains, Wrench};
 use hamflight_bitcraze::model::MODEL;
-use host_train::control::adapter::CoreController;
-use host_train::control::controller::Controller;
-use host_train::fly::eval;
-use host_train::sim::plant::{Plant, PlantState};
-use host_train::sim::scenario::Scenario;
-use host_train::sim::trajectory::TrajectoryPoint;
+use host_train::control::{Controller, CoreController};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use std::ffi::{c_int, c_void, CStr, CString};
 use std::path::Path;
@@ -473,7 +470,7 @@ fn c_path_matches_native_with(
 ) -> f64 {
     let native_sc = scenario("paper-spiral");
     let mut native = CoreController::new("native", model, gains);
-    let native_log = eval::fly(&native_sc, &mut native);
+    let native_log = fly_scenario(&native_sc, &mut native);
 
     // The same flight with the shim at the stabilizer's 1 kHz (the physics stays at 1 kHz). It
     // starts in the air and flying, so the airborne rule must not hold the adaptation back.
@@ -491,7 +488,7 @@ fn c_path_matches_native_with(
     shim.supervisor(true, true);
     shim.set_param_f32("airHeight", 0.0);
     let mut c = ShimController { shim };
-    let c_log = eval::fly(&c_sc, &mut c);
+    let c_log = fly_scenario(&c_sc, &mut c);
 
     assert!(native_log.crash_time_s.is_none() && c_log.crash_time_s.is_none());
     assert_eq!(c_log.p_m.len(), 2 * native_log.p_m.len() - 1);
@@ -524,9 +521,7 @@ fn c_path_matches_native_with(
         max_diff_m < 1e-5,
         "C path drifts {max_diff_m} m from native"
     );
-    let rmse = eval::Report::from_log(&c_log, None)
-        .rmse_pos_window_m
-        .unwrap();
+    let rmse = Report::from_log(&c_log, None).rmse_pos_window_m.unwrap();
     assert!(rmse < 0.01, "the C path tracks paper-spiral: RMSE {rmse} m");
     // The estimate the logs show is the native controller's.
     let a_native = native.inner().estimate();

@@ -1,9 +1,9 @@
 //! What the closed-loop test files share: repository paths, scenarios by name, and one flight
 //! of a named controller on the shipped blob that must not crash.
 
-use host_train::control::registry;
-use host_train::fly::eval::{self, Report};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{by_name, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
 use std::path::{Path, PathBuf};
 
 /// A path in the repository.
@@ -18,9 +18,9 @@ pub fn scenario(name: &str) -> Scenario {
 
 /// Flies `name` (the shipped blob for the learned controllers) on `sc`; fails on a crash.
 pub fn fly(name: &str, sc: &Scenario) -> Report {
-    let weights = repo(registry::DEFAULT_WEIGHTS);
-    let mut ctrl = registry::by_name(name, sc, Some(&weights)).expect("controller exists");
-    let log = eval::fly(sc, ctrl.as_mut());
+    let weights = repo(DEFAULT_WEIGHTS);
+    let mut ctrl = by_name(name, sc, Some(&weights)).expect("controller exists");
+    let log = fly_scenario(sc, ctrl.as_mut());
     let r = Report::from_flight(&log, sc, None);
     assert!(!r.crashed, "{name} crashed on {}: {r:?}", sc.name);
     r

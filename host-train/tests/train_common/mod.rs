@@ -3,10 +3,10 @@
 #![allow(dead_code)]
 
 use hamflight::model::{rk4_step, HamiltonianModel, State, FEATURES, GRAVITY_M_S2, MASS_KG};
-use host_train::io::dataset::{
-    realization_file, save, Dataset, Flight, Realization, RealizationMeta, Sample,
+use host_train::io::{
+    realization_file, save_dataset, Dataset, Flight, Realization, RealizationMeta, Sample,
 };
-use host_train::sim::plant::PlantState;
+use host_train::sim::PlantState;
 use nalgebra::{Vector3, Vector4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -112,7 +112,7 @@ pub fn write_dataset_with<M: HamiltonianModel>(
             flights,
         });
     }
-    save(dir, &ds).unwrap();
+    save_dataset(dir, &ds).unwrap();
 }
 
 /// A fresh scratch directory under the target dir.

@@ -63,7 +63,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', default_values_t = DEFAULT_CONTROLLERS.map(String::from))]
     pub controllers: Vec<String>,
     /// Weight blob for the learned controllers.
-    #[arg(long, default_value = host_train::control::registry::DEFAULT_WEIGHTS)]
+    #[arg(long, default_value = host_train::control::DEFAULT_WEIGHTS)]
     pub weights: PathBuf,
     /// The state every controller is given: `kalman` (Bitcraze's estimate of our sensor models)
     /// or `truth` (the true position, velocity and attitude; body rates and acceleration still

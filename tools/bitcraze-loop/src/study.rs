@@ -9,12 +9,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use hamflight::{Measurement, Setpoint, State};
-use host_train::control::adapter::CoreStep;
-use host_train::control::registry::core_by_name;
-use host_train::fly::eval::{Report, CRASH_ERR_M};
-use host_train::io::flightlog::FlightLog;
-use host_train::sim::plant::{gaussian, so3_exp};
-use host_train::sim::scenario::Scenario;
+use host_train::control::{core_by_name, CoreStep};
+use host_train::fly::{Report, CRASH_ERR_M};
+use host_train::io::FlightLog;
+use host_train::sim::{gaussian, so3_exp, Scenario};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -79,7 +77,7 @@ fn with_bitcraze_geometry(scenario: &Scenario, p: &ffi::Platform) -> Scenario {
 
 /// The true state in Bitcraze's `state_t` form (the legacy attitude angles as their
 /// estimator writes them: pitch inverted).
-fn bc_truth(s: &host_train::sim::plant::PlantState, acc_world_g: Vector3<f64>) -> BcState {
+fn bc_truth(s: &host_train::sim::PlantState, acc_world_g: Vector3<f64>) -> BcState {
     let rpy = s.rpy().map(f64::to_degrees);
     BcState {
         p_m: f32x3(&s.p_m),
@@ -378,11 +376,11 @@ pub fn run(args: &Args) -> Result<()> {
             "platform": platform,
             "flights": flights,
         });
-        host_train::io::files::write_atomic(
+        host_train::io::write_atomic(
             &dir.join("report.json"),
             serde_json::to_string_pretty(&report)?.as_bytes(),
         )?;
-        host_train::io::files::write_atomic(&dir.join("table.md"), md.as_bytes())?;
+        host_train::io::write_atomic(&dir.join("table.md"), md.as_bytes())?;
         let logs = dir.join("logs");
         std::fs::create_dir_all(&logs)?;
         for f in &flights {
@@ -390,7 +388,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "{}-{}.json",
                 f.report.scenario, f.report.controller
             ));
-            host_train::io::files::write_json_atomic(&file, &f.log)?;
+            host_train::io::write_json_atomic(&file, &f.log)?;
         }
         eprintln!("wrote {}/report.json, table.md and logs/", dir.display());
     }

@@ -4,57 +4,27 @@
 //! over the decoder; CSV import errors name the line; disturbance-free flights train with
 //! a_j = 0. Run in release: `cargo test --release -p host-train --test usd_import`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use host_train::data::import::{self, ImportArgs};
-
-use host_train::fly::usdrecord::{logged_vars, UsdRecorder};
-use host_train::io::usdlog::LEE_COMMAND_VARS;
-use host_train::io::usdlog::{
-    self, crc32, EventType, ParseOptions, UsdError, UsdWriter, Var, VarType, FIXED_FREQUENCY_ID,
+use host_train::data::{airborne_flights, decode_csv, decode_usd, run_import, ImportArgs};
+use host_train::fly::usd_logged_vars;
+use host_train::io::{
+    crc32, parse_usd, EventType, ParseOptions, UsdError, UsdWriter, Var, VarType,
+    FIXED_FREQUENCY_ID, LEE_COMMAND_VARS,
 };
-use host_train::sim::scenario::Scenario;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn tmpdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("hamflight-usd-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn scenario(name: &str, duration_s: f64) -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenarios")
-        .join(format!("{name}.toml"));
-    let mut s = Scenario::load(path).unwrap();
-    s.spec.duration_s = duration_s;
-    s
-}
-
-/// Flies `name` for `duration_s` with the geometric controller and returns the uSD log and the
-/// values the recorder logged.
-fn sitl_log(name: &str, duration_s: f64) -> (Vec<u8>, Vec<(u64, [f64; 20])>) {
-    let sc = scenario(name, duration_s);
-    let mut ctrl = host_train::control::registry::by_name("geometric", &sc, None).unwrap();
-    let mut rec = UsdRecorder::new(ctrl.as_mut(), sc.plant().params.clone());
-    let log = host_train::fly::eval::fly(&sc, &mut rec);
-    assert!(log.crash_time_s.is_none());
-    let rows = rec.rows.clone();
-    (rec.finish(), rows)
-}
-
-fn args(out: &Path) -> ImportArgs {
-    ImportArgs::new(out.to_path_buf(), 0.027)
-}
+mod logs;
+use logs::{args, csv_of, fix_crc, sitl_log, small_log, tmpdir};
 
 #[test]
 fn sitl_usd_log_round_trips_exactly() {
     let (bytes, rows) = sitl_log("paper-spiral-realistic", 2.0);
     // 500 Hz for 2 s: ticks 0..999 (the last tick only scores).
     assert_eq!(rows.len(), 1000);
-    let (log, rep) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
+    let (log, rep) = parse_usd(&bytes, ParseOptions::default()).unwrap();
     assert!(rep.crc_ok);
     assert_eq!(log.version, 2);
     assert_eq!(log.event_types.len(), 1);
@@ -62,7 +32,7 @@ fn sitl_usd_log_round_trips_exactly() {
     assert_eq!(et.id, FIXED_FREQUENCY_ID);
     assert_eq!(et.name, "fixedFrequency");
     let names: Vec<&str> = et.vars.iter().map(|v| v.name.as_str()).collect();
-    assert_eq!(names, logged_vars());
+    assert_eq!(names, usd_logged_vars());
     assert_eq!(names.len(), 20);
     assert!(et.vars.iter().all(|v| v.ty == VarType::F32));
     assert_eq!(log.events.len(), rows.len());
@@ -75,7 +45,7 @@ fn sitl_usd_log_round_trips_exactly() {
     assert!(bytes.windows(needle.len()).any(|w| w == needle));
 
     // The importer converts Bitcraze's conventions back to the plant's state.
-    let d = import::decode_usd(
+    let d = decode_usd(
         Path::new("sitl.bin"),
         &bytes,
         &LEE_COMMAND_VARS.map(String::from),
@@ -107,53 +77,15 @@ fn sitl_usd_log_round_trips_exactly() {
     }
 }
 
-fn small_log() -> Vec<u8> {
-    let mut w = UsdWriter::new(vec![
-        EventType {
-            id: FIXED_FREQUENCY_ID,
-            name: "fixedFrequency".into(),
-            vars: vec![
-                Var {
-                    name: "a.f".into(),
-                    ty: VarType::F32,
-                },
-                Var {
-                    name: "a.i".into(),
-                    ty: VarType::I16,
-                },
-                Var {
-                    name: "a.u".into(),
-                    ty: VarType::U8,
-                },
-            ],
-        },
-        EventType {
-            id: 7,
-            name: "takeoff".into(),
-            vars: vec![Var {
-                name: "h".into(),
-                ty: VarType::U32,
-            }],
-        },
-    ]);
-    for k in 0..6u64 {
-        w.event(0, 1000 * k, &[k as f64 * 0.5, -(k as f64), 200.0]);
-        if k == 2 {
-            w.event(1, 1000 * k + 1, &[42.0]);
-        }
-    }
-    w.finish()
-}
-
 #[test]
 fn every_truncation_and_flipped_crc_byte_gives_the_documented_error() {
     let bytes = small_log();
-    let (log, _) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
+    let (log, _) = parse_usd(&bytes, ParseOptions::default()).unwrap();
     assert_eq!(log.events.len(), 7);
     assert_eq!(log.events[3].values, vec![42.0]);
     assert_eq!(log.events[5].values, vec![2.0, -4.0, 200.0]);
     for n in 0..bytes.len() {
-        let e = usdlog::parse(&bytes[..n], ParseOptions::default()).unwrap_err();
+        let e = parse_usd(&bytes[..n], ParseOptions::default()).unwrap_err();
         let documented = matches!(
             e,
             UsdError::TooShort { .. }
@@ -167,7 +99,7 @@ fn every_truncation_and_flipped_crc_byte_gives_the_documented_error() {
         let lax = ParseOptions {
             allow_bad_crc: true,
         };
-        if let Ok((l, rep)) = usdlog::parse(&bytes[..n], lax) {
+        if let Ok((l, rep)) = parse_usd(&bytes[..n], lax) {
             assert!(!rep.crc_ok || n == bytes.len());
             assert!(l.events.len() <= log.events.len());
             for (a, b) in l.events.iter().zip(&log.events) {
@@ -179,7 +111,7 @@ fn every_truncation_and_flipped_crc_byte_gives_the_documented_error() {
         let mut b = bytes.clone();
         let at = b.len() - k;
         b[at] ^= 0x5a;
-        match usdlog::parse(&b, ParseOptions::default()) {
+        match parse_usd(&b, ParseOptions::default()) {
             Err(UsdError::CrcMismatch {
                 offset,
                 stored,
@@ -191,24 +123,15 @@ fn every_truncation_and_flipped_crc_byte_gives_the_documented_error() {
             other => panic!("flipped CRC byte {k}: {other:?}"),
         }
     }
-    let e = usdlog::parse(&bytes[..bytes.len() - 3], ParseOptions::default()).unwrap_err();
+    let e = parse_usd(&bytes[..bytes.len() - 3], ParseOptions::default()).unwrap_err();
     assert!(e.to_string().contains("CRC mismatch"), "{e}");
-}
-
-/// Recomputes the trailing CRC so that a mutated file reaches the event decoder.
-fn fix_crc(b: &mut [u8]) {
-    if b.len() >= 4 {
-        let n = b.len() - 4;
-        let crc = crc32(&b[..n]).to_le_bytes();
-        b[n..].copy_from_slice(&crc);
-    }
 }
 
 #[test]
 fn unknown_event_types_are_skipped_and_counted_and_undeclared_ids_rejected() {
     let (bytes, _) = sitl_log("hover", 0.2);
     // Add a declared event type the importer does not use, with three events.
-    let (log, _) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
+    let (log, _) = parse_usd(&bytes, ParseOptions::default()).unwrap();
     let mut types = log.event_types.clone();
     types.push(EventType {
         id: 3,
@@ -226,7 +149,7 @@ fn unknown_event_types_are_skipped_and_counted_and_undeclared_ids_rejected() {
         }
     }
     let bytes2 = w.finish();
-    let d = import::decode_usd(
+    let d = decode_usd(
         Path::new("x.bin"),
         &bytes2,
         &LEE_COMMAND_VARS.map(String::from),
@@ -236,25 +159,25 @@ fn unknown_event_types_are_skipped_and_counted_and_undeclared_ids_rejected() {
     .unwrap();
     assert_eq!(d.samples.len(), log.events.len());
     assert_eq!(d.skipped_events, log.events.len().div_ceil(30));
-    let (l2, _) = usdlog::parse(&bytes2, ParseOptions::default()).unwrap();
+    let (l2, _) = parse_usd(&bytes2, ParseOptions::default()).unwrap();
     assert_eq!(l2.events[1].values, vec![1.5]);
 
     // An id the header does not declare: the error names its offset.
-    let (log, _) = usdlog::parse(&small_log(), ParseOptions::default()).unwrap();
+    let (log, _) = parse_usd(&small_log(), ParseOptions::default()).unwrap();
     let at = log.events[1].offset;
     let mut b = small_log();
     b[at] = 0x34;
     b[at + 1] = 0x12;
     fix_crc(&mut b);
     assert_eq!(
-        usdlog::parse(&b, ParseOptions::default()).unwrap_err(),
+        parse_usd(&b, ParseOptions::default()).unwrap_err(),
         UsdError::UndeclaredEvent {
             offset: at,
             id: 0x1234
         }
     );
     // A missing variable is named.
-    let e = import::decode_usd(
+    let e = decode_usd(
         Path::new("small.bin"),
         &small_log(),
         &LEE_COMMAND_VARS.map(String::from),
@@ -322,51 +245,18 @@ fn randomized_and_mutated_logs_never_panic() {
         let lax = ParseOptions {
             allow_bad_crc: rng.gen(),
         };
-        match usdlog::parse(&b, lax) {
+        match parse_usd(&b, lax) {
             Ok(_) => ok += 1,
             Err(e) => {
                 assert!(e.to_string().starts_with("byte "), "{e}");
                 err += 1;
             }
         }
-        let _ = import::decode_usd(Path::new("fuzz.bin"), &b, &cmd, &[], lax);
-        let _ = import::decode_csv(Path::new("fuzz.csv"), &b, Some(12));
+        let _ = decode_usd(Path::new("fuzz.bin"), &b, &cmd, &[], lax);
+        let _ = decode_csv(Path::new("fuzz.csv"), &b, Some(12));
     }
     eprintln!("6000 inputs: {ok} decoded, {err} rejected");
     assert!(ok > 500 && err > 500, "{ok} decoded, {err} rejected");
-}
-
-fn csv_of(rows: &[(u64, [f64; 20])]) -> String {
-    let mut s = String::from(
-        "t_s,px_m,py_m,pz_m,qw,qx,qy,qz,vx_world_m_s,vy_world_m_s,vz_world_m_s,wx_rad_s,wy_rad_s,wz_rad_s,f_n,tau_x_nm,tau_y_nm,tau_z_nm\n",
-    );
-    let deg = std::f64::consts::PI / 180.0;
-    for (k, (t, v)) in rows.iter().enumerate() {
-        // Commands logged at half the state rate: every other row leaves them empty.
-        let cmd = if k % 2 == 0 {
-            format!("{},{},{},{}", v[13], v[14], v[15], v[16])
-        } else {
-            ",,,".into()
-        };
-        s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{cmd}\n",
-            *t as f64 * 1e-6,
-            v[0],
-            v[1],
-            v[2],
-            v[9],
-            v[6],
-            v[7],
-            v[8],
-            v[3],
-            v[4],
-            v[5],
-            v[10] * deg,
-            v[11] * deg,
-            v[12] * deg
-        ));
-    }
-    s
 }
 
 #[test]
@@ -381,14 +271,14 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     let mut a = args(&out);
     a.logs = vec![usd.clone()];
     a.calm = vec![csv.clone()];
-    let files = import::run(&a).unwrap();
+    let files = run_import(&a).unwrap();
     assert_eq!(files.len(), 2);
     // 1500 samples (t = 0 … 2.998 s), 0.5 s trimmed at both ends: 1000 kept.
     assert_eq!(files[0].samples_in, 1500);
     assert_eq!(files[0].samples_kept, 1000);
     assert_eq!(files[0].flights, 1);
     assert!(files[1].disturbance_free);
-    let ds = host_train::io::dataset::load(&out).unwrap();
+    let ds = host_train::io::load_dataset(&out).unwrap();
     assert!((ds.manifest.sample_hz - 500.0).abs() < 1e-6);
     assert_eq!(ds.manifest.source, "import");
     assert!(ds.realizations[1].meta.disturbance_free);
@@ -396,14 +286,14 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     // The CSV's commands were held over the rows that left them empty.
     let f = &ds.realizations[1].flights[0].samples;
     assert_eq!(f[1].wrench, f[0].wrench);
-    let w = host_train::io::dataset::windows(&ds, Default::default()).unwrap();
+    let w = host_train::io::dataset_windows(&ds, Default::default()).unwrap();
     assert_eq!(w.len(), 2 * 249);
 
     // Ground: samples below the minimum height are excluded.
     let mut high = args(&dir.join("high"));
     high.logs = vec![usd.clone()];
     high.min_height_m = 10.0;
-    let e = format!("{:#}", import::run(&high).unwrap_err());
+    let e = format!("{:#}", run_import(&high).unwrap_err());
     assert!(e.contains("flight.bin") && e.contains("no airborne"), "{e}");
     assert!(!dir.join("high/manifest.json").exists());
 
@@ -415,7 +305,7 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     std::fs::write(&csv, lines.join("\n")).unwrap();
     let mut b = args(&dir.join("bad"));
     b.logs = vec![usd.clone(), csv.clone()];
-    let e = format!("{:#}", import::run(&b).unwrap_err());
+    let e = format!("{:#}", run_import(&b).unwrap_err());
     assert!(e.contains("flight.csv") && e.contains("line 8"), "{e}");
     assert!(!dir.join("bad").exists());
     // A flipped CRC byte in the uSD file is reported with the file and offset.
@@ -423,7 +313,7 @@ fn import_writes_airborne_flights_and_csv_errors_name_the_line() {
     let n = c.len();
     c[n - 1] ^= 1;
     std::fs::write(&usd, &c).unwrap();
-    let e = format!("{:#}", import::run(&b).unwrap_err());
+    let e = format!("{:#}", run_import(&b).unwrap_err());
     assert!(
         e.contains("flight.bin") && e.contains(&format!("byte {}", n - 4)) && e.contains("CRC"),
         "{e}"
@@ -442,7 +332,7 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
     let mut a = args(&out);
     a.logs = vec![dir.join("windy.bin")];
     a.calm = vec![dir.join("calm.bin")];
-    import::run(&a).unwrap();
+    run_import(&a).unwrap();
     // Two epochs on 4 s of hover identify no inertia (J comes out 2.7–3.6× the stock one):
     // the flight check may refuse to fly such a model (with the per-axis attitude
     // gains its gradient law crashes on the rotor loss at 6.2 s), and this test is about the
@@ -453,7 +343,7 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
         flight_check: false,
         ..Default::default()
     };
-    let r = host_train::pipeline::train::run(&cfg, &out, &dir.join("w.hfw"), true).unwrap();
+    let r = host_train::pipeline::run_train(&cfg, &out, &dir.join("w.hfw"), true).unwrap();
     assert_eq!(r.realizations.len(), 2);
     assert!(r.realizations[1].disturbance_free);
     assert!(
@@ -469,7 +359,7 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
 #[derive(clap::Parser)]
 struct EvalCli {
     #[command(flatten)]
-    eval: host_train::fly::eval::EvalArgs,
+    eval: host_train::fly::EvalArgs,
 }
 
 #[test]
@@ -489,16 +379,16 @@ fn eval_log_usd_writes_a_log_that_imports() {
         "--log-usd".as_ref(),
         log.as_os_str(),
     ] as [&std::ffi::OsStr; 9]);
-    let report = host_train::fly::eval::run(&cli.eval).unwrap();
+    let report = host_train::fly::run_eval(&cli.eval).unwrap();
     assert!(!report.crashed);
     let bytes = std::fs::read(&log).unwrap();
-    let (l, rep) = usdlog::parse(&bytes, ParseOptions::default()).unwrap();
+    let (l, rep) = parse_usd(&bytes, ParseOptions::default()).unwrap();
     assert!(rep.crc_ok);
     // 10 s at 500 Hz: one event per controller step.
     assert_eq!(l.events.len(), 5000);
     let mut a = args(&dir.join("data"));
     a.logs = vec![log];
-    let files = import::run(&a).unwrap();
+    let files = run_import(&a).unwrap();
     assert_eq!(files[0].samples_in, 5000);
     assert_eq!(files[0].samples_kept, 4500);
     std::fs::remove_dir_all(&dir).ok();
@@ -520,7 +410,7 @@ fn version_1_logs_have_millisecond_timestamps() {
         b.extend_from_slice(&(-7i16).to_le_bytes());
     }
     b.extend_from_slice(&crc32(&b).to_le_bytes());
-    let (log, rep) = usdlog::parse(&b, ParseOptions::default()).unwrap();
+    let (log, rep) = parse_usd(&b, ParseOptions::default()).unwrap();
     assert!(rep.crc_ok);
     assert_eq!(log.version, 1);
     let ts: Vec<u64> = log.events.iter().map(|e| e.timestamp_us).collect();
@@ -529,15 +419,15 @@ fn version_1_logs_have_millisecond_timestamps() {
     // Version 3 is refused by name.
     b[1] = 3;
     assert_eq!(
-        usdlog::parse(&b, ParseOptions::default()).unwrap_err(),
+        parse_usd(&b, ParseOptions::default()).unwrap_err(),
         UsdError::UnsupportedVersion { version: 3 }
     );
 }
 
 #[test]
 fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
-    use host_train::io::dataset::Sample;
-    use host_train::sim::plant::PlantState;
+    use host_train::io::Sample;
+    use host_train::sim::PlantState;
     // 500 Hz: 1 s on the ground (z = 0, motors idle), 3 s airborne at 0.5 m with hover thrust,
     // a 50 ms gap at t = 2.5 s, then 1 s landed again with the motors still spinning (thrust
     // above the rule's fraction, but z below the minimum height).
@@ -560,7 +450,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         });
     }
     let a = args(Path::new("unused"));
-    let flights = import::airborne_flights(&samples, &a);
+    let flights = airborne_flights(&samples, &a);
     let spans: Vec<(f64, f64, usize)> = flights
         .iter()
         .map(|f| {
@@ -578,7 +468,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         max_gap_s: 0.02,
         ..a
     };
-    let flights = import::airborne_flights(&samples, &a);
+    let flights = airborne_flights(&samples, &a);
     let spans: Vec<(f64, f64, usize)> = flights
         .iter()
         .map(|f| {
@@ -596,7 +486,7 @@ fn ground_take_off_and_landing_are_excluded_by_the_documented_rule() {
         .all(|s| s.state.p_m.z >= 0.1 && s.wrench[0] > 0.0));
     // Without trimming, the stretches are the airborne samples themselves.
     let untrimmed = ImportArgs { trim_s: 0.0, ..a };
-    let n: usize = import::airborne_flights(&samples, &untrimmed)
+    let n: usize = airborne_flights(&samples, &untrimmed)
         .iter()
         .map(|f| f.samples.len())
         .sum();

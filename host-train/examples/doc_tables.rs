@@ -1,0 +1,310 @@
+//! The docs' generated tables: every table between a pair of markers
+//!
+//! ```text
+//! <!-- generated: NAME -->
+//! ...
+//! <!-- end generated: NAME -->
+//! ```
+//!
+//! in README.md and docs/*.md is written by this program from SITL flights of the shipped blob,
+//! so no page's number is typed by hand.
+//!
+//! - `cargo run --release -p host-train --example doc_tables -- --write` rewrites the blocks;
+//! - `-- --check` (CI) flies the same flights and fails, naming the page, the block and the first
+//!   line that differs, when a page's block is not what the code gives today (a number edited by
+//!   hand, or a change to the law that moved a figure without regenerating the page).
+//!
+//! Every NAME on a page must be one this program knows, and every block it knows must be on a
+//! page: a missing or unknown block is an error too.
+
+use host_train::control::{by_name, DEFAULT_WEIGHTS};
+use host_train::fly::{fly_scenario, Report};
+use host_train::sim::Scenario;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The pages that may hold generated blocks.
+const PAGES: [&str; 2] = ["README.md", "docs/adaptation.md"];
+
+/// The scenarios of the per-law table: each exercises the estimator.
+const LAW_SCENARIOS: [&str; 6] = [
+    "paper-spiral",
+    "paper-spiral-realistic",
+    "step",
+    "gust-spiral",
+    "rotor-loss-mid",
+    "hover-wind-step",
+];
+const LAW_CONTROLLERS: [&str; 4] = [
+    "adaptive-gradient",
+    "adaptive-composite",
+    "geometric-adaptive-gradient",
+    "geometric-adaptive-composite",
+];
+
+fn cm(x: Option<f64>) -> String {
+    x.map_or("—".into(), |x| format!("{:.3}", 100.0 * x))
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// One flight of `controller` (the shipped blob for the learned ones) on `scenario`.
+fn flight(sc: &Scenario, controller: &str) -> anyhow::Result<Report> {
+    let weights = root().join(DEFAULT_WEIGHTS);
+    let mut ctrl = by_name(controller, sc, Some(&weights))?;
+    let log = fly_scenario(sc, ctrl.as_mut());
+    Ok(Report::from_flight(&log, sc, None))
+}
+
+fn scenario(name: &str) -> anyhow::Result<Scenario> {
+    Scenario::load(root().join(format!("scenarios/{name}.toml")))
+}
+
+/// `laws`: both laws on both adaptive controllers, on the scenarios that exercise the estimator.
+fn laws_table() -> anyhow::Result<String> {
+    let mut out = String::from(
+        "| scenario | controller | RMSE t ≥ 5 s (cm) | max (cm) | events: peak (cm) / recovery (s) / RMSE 5 s after (cm) |\n| --- | --- | --- | --- | --- |\n",
+    );
+    for s in LAW_SCENARIOS {
+        let sc = scenario(s)?;
+        for c in LAW_CONTROLLERS {
+            let r = flight(&sc, c)?;
+            let ev: Vec<String> = r
+                .events
+                .iter()
+                .map(|e| {
+                    format!(
+                        "t = {} s: {} / {} / {}",
+                        e.t_s,
+                        cm(Some(e.peak_err_m)),
+                        e.recovery_s.map_or("never".into(), |x| format!("{x:.2}")),
+                        cm(e.rmse_after_m)
+                    )
+                })
+                .collect();
+            let crashed = if r.crashed { " (crashed)" } else { "" };
+            let events = if ev.is_empty() {
+                "—".into()
+            } else {
+                ev.join("; ")
+            };
+            out += &format!(
+                "| {s} | {c}{crashed} | {} | {} | {events} |\n",
+                cm(r.rmse_pos_window_m),
+                cm(Some(r.max_err_m)),
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// `rotor-loss-set`: RMSE over t ≥ 5 s, the peak after the fault and the recovery time, per
+/// rotor share, lag, law and state source.
+fn rotor_loss_table() -> anyhow::Result<String> {
+    let mut out = String::from(
+        "| rotor, lag | law | true state: RMSE (cm) / peak (cm) / recovery (s) | sensor chain: RMSE (cm) / peak (cm) / recovery (s) |\n| --- | --- | --- | --- |\n",
+    );
+    let cell = |r: &Report| {
+        let e = r.events.first();
+        let rec = e
+            .and_then(|e| e.recovery_s)
+            .map_or("never < 1 cm".into(), |x| format!("{x:.2}"));
+        let crashed = r
+            .crash_time_s
+            .map_or(String::new(), |t| format!(" (crash at {t:.2} s)"));
+        format!(
+            "{} / {} / {rec}{crashed}",
+            cm(r.rmse_pos_window_m),
+            cm(e.map(|e| e.peak_err_m))
+        )
+    };
+    for share in [55, 50] {
+        for lag in [20, 50, 72] {
+            for law in ["gradient", "composite"] {
+                let name = format!("rotor-loss-{share}-lag{lag}");
+                let c = format!("adaptive-{law}");
+                let t = flight(&scenario(&name)?, &c)?;
+                let ch = flight(&scenario(&format!("cf-{name}"))?, &c)?;
+                out += &format!(
+                    "| 1 to {share} %, {lag} ms | {law} | {} | {} |\n",
+                    cell(&t),
+                    cell(&ch)
+                );
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `default-vs-paper`: the default law (composite) against the paper's gradient law on every
+/// scenario flown with the shipped blob (the `bl-*` ones have a blob of their own), with the bar
+/// max(1.5×, +0.05 cm).
+fn default_vs_paper_table() -> anyhow::Result<String> {
+    let mut names: Vec<String> = std::fs::read_dir(root().join("scenarios"))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .filter(|n| !n.starts_with("bl-"))
+        .collect();
+    names.sort();
+    let mut out = String::from(
+        "| scenario | default (composite), RMSE t ≥ 5 s (cm) | paper's gradient law (cm) | bar max(1.5×, +0.05 cm) |\n| --- | --- | --- | --- |\n",
+    );
+    for n in names {
+        let sc = scenario(&n)?;
+        let (d, g) = (flight(&sc, "adaptive")?, flight(&sc, "adaptive-gradient")?);
+        let score = |r: &Report| {
+            if r.crashed {
+                None
+            } else {
+                r.rmse_pos_window_m
+            }
+        };
+        let verdict = match (score(&d), score(&g)) {
+            (Some(d), Some(g)) if d <= (1.5 * g).max(g + 0.0005) => "met".to_string(),
+            (Some(_), Some(_)) => "**missed**".to_string(),
+            (None, _) => "**default crashed**".to_string(),
+            (Some(_), None) => "met (the paper's law crashed)".to_string(),
+        };
+        out += &format!(
+            "| {n} | {} | {} | {verdict} |\n",
+            cm(score(&d)),
+            cm(score(&g))
+        );
+    }
+    Ok(out)
+}
+
+/// Every block this program writes, by name.
+fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
+    let mut b = BTreeMap::new();
+    b.insert("laws", laws_table()?);
+    b.insert("rotor-loss-set", rotor_loss_table()?);
+    b.insert("default-vs-paper", default_vs_paper_table()?);
+    Ok(b)
+}
+
+const OPEN: &str = "<!-- generated: ";
+const CLOSE: &str = "<!-- end generated: ";
+
+/// The page with every block replaced by `blocks`' text; the names it held.
+fn rewrite(
+    page: &str,
+    text: &str,
+    blocks: &BTreeMap<&str, String>,
+) -> anyhow::Result<(String, Vec<String>)> {
+    let mut out = String::new();
+    let mut names = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find(OPEN) {
+        let after = &rest[i + OPEN.len()..];
+        let end = after
+            .find(" -->")
+            .ok_or_else(|| anyhow::anyhow!("{page}: an unterminated `{OPEN}` marker"))?;
+        let name = after[..end].trim().to_string();
+        let close = format!("{CLOSE}{name} -->");
+        let body_start = i + OPEN.len() + end + " -->".len();
+        let j = rest[body_start..].find(&close).ok_or_else(|| {
+            anyhow::anyhow!("{page}: block `{name}` has no closing `{close}` marker")
+        })?;
+        let body = blocks.get(name.as_str()).ok_or_else(|| {
+            anyhow::anyhow!(
+                "{page}: block `{name}` is not one doc_tables writes ({:?})",
+                blocks.keys().collect::<Vec<_>>()
+            )
+        })?;
+        out += &rest[..body_start];
+        out += "\n";
+        out += body;
+        out += &close;
+        rest = &rest[body_start + j + close.len()..];
+        names.push(name);
+    }
+    out += rest;
+    Ok((out, names))
+}
+
+fn first_difference(a: &str, b: &str) -> String {
+    for (i, (x, y)) in a.lines().zip(b.lines()).enumerate() {
+        if x != y {
+            return format!("line {} of the block:\n  page: {x}\n  code: {y}", i + 1);
+        }
+    }
+    format!(
+        "the block has {} lines, the code gives {}",
+        a.lines().count(),
+        b.lines().count()
+    )
+}
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let write = match args.first().map(String::as_str) {
+        Some("--write") => true,
+        Some("--check") => false,
+        _ => {
+            eprintln!(
+                "usage: doc_tables --write | --check\n\n  --write  fly the flights and rewrite the generated blocks of {PAGES:?}\n  --check  fly them and fail if a page's block differs (CI)"
+            );
+            std::process::exit(2);
+        }
+    };
+    eprintln!("doc_tables: flying the tables' flights (seconds in release)...");
+    let blocks = generate()?;
+    let mut seen = Vec::new();
+    let mut stale = Vec::new();
+    for page in PAGES {
+        let path = root().join(page);
+        let text = std::fs::read_to_string(&path)?;
+        let (new, names) = rewrite(page, &text, &blocks)?;
+        if new != text {
+            if write {
+                host_train::io::write_atomic(&path, new.as_bytes())?;
+                eprintln!("doc_tables: rewrote {page} ({})", names.join(", "));
+            } else {
+                // Name the first block that differs.
+                for name in &names {
+                    let open = format!("{OPEN}{name} -->\n");
+                    let close = format!("{CLOSE}{name} -->");
+                    let page_block = text
+                        .split_once(&open)
+                        .and_then(|(_, b)| b.split_once(&close))
+                        .map_or("", |(b, _)| b);
+                    let code_block = blocks.get(name.as_str()).map_or("", String::as_str);
+                    if page_block != code_block {
+                        stale.push(format!(
+                            "{page}, block `{name}`: {}",
+                            first_difference(page_block, code_block)
+                        ));
+                    }
+                }
+            }
+        }
+        seen.extend(names);
+    }
+    for name in blocks.keys() {
+        if !seen.iter().any(|s| s == name) {
+            anyhow::bail!("block `{name}` is on no page of {PAGES:?}");
+        }
+    }
+    if !stale.is_empty() {
+        for s in &stale {
+            eprintln!("doc_tables: STALE {s}");
+        }
+        anyhow::bail!(
+            "{} generated block(s) differ from what the code gives: run `cargo run --release -p host-train --example doc_tables -- --write` and commit the pages",
+            stale.len()
+        );
+    }
+    if !write {
+        eprintln!(
+            "doc_tables: OK, {} blocks on {} pages match the code",
+            seen.len(),
+            PAGES.len()
+        );
+    }
+    Ok(())
+}

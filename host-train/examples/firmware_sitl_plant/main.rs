@@ -1,0 +1,103 @@
+//! The whole Crazyflie firmware in the loop: CrazySim's SITL build of Bitcraze's firmware, with
+//! hamflight as its out-of-tree controller (tools/firmware-sitl/build.sh), flies host-train's SITL
+//! plant over CrazySim's UDP protocol.
+//!
+//!     cargo run --release -p host-train --example firmware_sitl_plant -- \
+//!         [--firmware target/firmware-sitl/cmake/cf2_sitl/cf2] [--scenario scenarios/hover.toml]
+//!
+//! This program plays the part of CrazySim's Gazebo plugin (`crazysim_plugin.cpp`), with the
+//! plant in place of Gazebo, and the part of the pilot (CRTP setpoints). It starts the firmware
+//! (`cf2 PORT 127.0.0.1`), answers its handshake (`0xF3`), and every millisecond of wall clock
+//! steps the plant by 1 ms with the last motor command and sends the firmware one IMU sample (port
+//! 9, channel 0, type 0: specific force in units of 32 g / 65536, body rates in 4000 °/s / 65536),
+//! every 10 ms the true pose as a motion-capture system would (`EXT_POSE`, localization port 6,
+//! channel 1), every 20 ms a position setpoint (generic commander, port 7, type 7, as cflib's
+//! `send_position_setpoint`). The setpoints: on the ground until the firmware's estimator has
+//! settled, a smooth climb to the scenario's reference p*(0), the reference for the hold, a smooth
+//! descent to the ground, then the stop setpoint.
+//!
+//! PWM → rotor: the firmware's SITL power distribution (`power_distribution_sitl.c`, the one our
+//! controller's force/torque command goes through) turns the per-rotor force F into the PWM ratio
+//! p = pwm / 65535 by inverting F = A p² + B p (A = 0.091492681, B = 0.067673604, its
+//! `pwmToThrustA/B`). The plant inverts that same map, so each rotor makes the force the firmware
+//! meant, and runs at rpm = √(F / kf) with the scenario vehicle's kf. (CrazySim's own plugin maps
+//! PWM to a rotor speed, ω = 0.0408 pwm + 380.8 rad/s, for Gazebo's rotor with its own motor
+//! constant 1.7965e-8 N/(rad/s)²; with our plant's kf that map would not give the firmware's
+//! forces.)
+//!
+//! Mixer: the firmware's mixer constants are the CF2's (`quadSysId.armLength` 0.046 m,
+//! `thrustToTorque` 0.005964552 m); the CF2X plant's arm is 0.028 m and its km/kf 0.0251 m, so the
+//! plant would make 0.86 × the commanded roll/pitch torque and 4.2 × the yaw torque (the yaw loop
+//! then limit-cycles at saturation). Before the take-off this program sets both to the scenario
+//! vehicle's over CRTP (it reads the parameter TOC, writes by id and waits for the echo);
+//! `--stock-mixer` keeps the firmware's.
+//!
+//! Ground: the plant has no ground, so this program adds one: below z = 0 the vehicle rests at
+//! z = 0, level, still (the accelerometer then reads the normal force, 1 g up).
+//!
+//! Timing: not lock-stepped. The firmware's FreeRTOS ticks on a wall-clock timer, its stabilizer
+//! runs once per IMU packet, and this program paces the IMU stream at 1 kHz of wall clock (one
+//! plant millisecond per packet, never bursting to catch up). It reports how well it kept pace.
+//!
+//! Every other CRTP packet is relayed to a cflib client on `--cflib-port` (udp://127.0.0.1:19850),
+//! as smoke.py does, so cflib can watch the flight (or 0: no relay).
+//!
+//! Output: the flight's numbers on stdout, and in `--out` (default target/firmware-sitl/flight):
+//! flight.csv (every 10 ms), flight.svg (z and the setpoint, the position error) and console.log
+//! (the firmware's stdout).
+
+use std::path::PathBuf;
+
+use clap::Parser;
+
+mod crtp;
+mod flight;
+mod record;
+
+#[derive(Parser, Debug)]
+#[command(
+    about = "Fly host-train's plant with the SITL Crazyflie firmware (hamflight as its controller)"
+)]
+struct Args {
+    /// The SITL firmware (tools/firmware-sitl/build.sh).
+    #[arg(long, default_value = "target/firmware-sitl/cmake/cf2_sitl/cf2")]
+    firmware: PathBuf,
+    /// The scenario: its vehicle, effects and disturbance; its reference is the hold.
+    #[arg(long, default_value = "scenarios/hover.toml")]
+    scenario: PathBuf,
+    /// UDP port the firmware connects to.
+    #[arg(long, default_value_t = 19950)]
+    port: u16,
+    /// UDP port a cflib client may connect to (CRTP relay); 0: no relay.
+    #[arg(long, default_value_t = 19850)]
+    cflib_port: u16,
+    /// Seconds on the ground after the stabilizer loop starts (the Kalman estimator settles).
+    #[arg(long, default_value_t = 2.0)]
+    settle_s: f64,
+    /// Seconds of the climb to p*(0).
+    #[arg(long, default_value_t = 2.5)]
+    takeoff_s: f64,
+    /// Seconds of the hold (default: the scenario's duration).
+    #[arg(long)]
+    hold_s: Option<f64>,
+    /// Seconds of the descent.
+    #[arg(long, default_value_t = 2.5)]
+    land_s: f64,
+    /// Seconds into the hold before the "settled" statistics start.
+    #[arg(long, default_value_t = 2.0)]
+    window_s: f64,
+    /// Keep the firmware's own mixer constants (the CF2's quadSysId.armLength 0.046 m and
+    /// thrustToTorque 0.005964552 m) instead of setting them to the scenario vehicle's.
+    #[arg(long)]
+    stock_mixer: bool,
+    /// Directory for flight.csv, flight.svg, console.log.
+    #[arg(long, default_value = "target/firmware-sitl/flight")]
+    out: PathBuf,
+}
+
+fn main() {
+    if let Err(e) = flight::run() {
+        eprintln!("firmware_sitl_plant: {e:#}");
+        std::process::exit(1);
+    }
+}
