@@ -17,14 +17,16 @@
 //! Every NAME on a page must be one this program knows, and every block it knows must be on a
 //! page: a missing or unknown block is an error too.
 
-use host_train::control::{by_name, DEFAULT_WEIGHTS};
+use hamflight::{Gains, VehicleFacts};
+use host_train::control::{by_name, load_learned, Controller, CoreController, DEFAULT_WEIGHTS};
 use host_train::fly::{fly_scenario, Report};
 use host_train::sim::Scenario;
+use host_train::ControllerSpec;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The pages that may hold generated blocks.
-const PAGES: [&str; 2] = ["README.md", "docs/adaptation.md"];
+const PAGES: [&str; 3] = ["README.md", "docs/adaptation.md", "docs/crazyflie-chain.md"];
 
 /// The scenarios of the per-law table: each exercises the estimator.
 const LAW_SCENARIOS: [&str; 6] = [
@@ -178,12 +180,61 @@ fn default_vs_paper_table() -> anyhow::Result<String> {
     Ok(out)
 }
 
+/// `gains`: the shipped blob flown with the perfect-state gains (`Gains::for_mass_kg`) and with
+/// the vehicle-derived ones (`Gains::for_vehicle`, the default), on the true state.
+fn gains_table() -> anyhow::Result<String> {
+    const ROWS: [(&str, &str); 13] = [
+        ("paper-spiral", "adaptive"),
+        ("paper-spiral", "adaptive-gradient"),
+        ("paper-spiral-realistic", "adaptive"),
+        ("paper-spiral-realistic", "adaptive-gradient"),
+        ("step", "adaptive"),
+        ("step", "adaptive-gradient"),
+        ("gust-spiral", "adaptive"),
+        ("gust-spiral", "adaptive-gradient"),
+        ("diamond", "adaptive"),
+        ("diamond", "adaptive-gradient"),
+        ("rotor-loss-mid", "adaptive"),
+        ("rotor-loss-mid", "adaptive-gradient"),
+        ("paper-spiral", "learned"),
+    ];
+    let weights = root().join(DEFAULT_WEIGHTS);
+    let mut out = String::from(
+        "| scenario | controller | `Gains::for_mass_kg` | `Gains::for_vehicle` (default) |\n| --- | --- | --- | --- |\n",
+    );
+    for (s, c) in ROWS {
+        let sc = scenario(s)?;
+        let spec = ControllerSpec::parse(c)?;
+        let mut cells = Vec::new();
+        for perfect_state in [true, false] {
+            let model = load_learned(&weights)?;
+            let facts = VehicleFacts::of(&model);
+            let base = if perfect_state {
+                Gains::for_mass_kg(facts.mass_kg)
+            } else {
+                Gains::for_vehicle(&facts)
+            };
+            let mut ctrl = CoreController::new(c, model, spec.gains(base));
+            let log = fly_scenario(&sc, &mut ctrl as &mut dyn Controller);
+            let r = Report::from_flight(&log, &sc, None);
+            cells.push(if r.crashed {
+                "crashed".to_string()
+            } else {
+                format!("{} cm", cm(r.rmse_pos_window_m))
+            });
+        }
+        out += &format!("| {s} | {c} | {} | {} |\n", cells[0], cells[1]);
+    }
+    Ok(out)
+}
+
 /// Every block this program writes, by name.
 fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
     let mut b = BTreeMap::new();
     b.insert("laws", laws_table()?);
     b.insert("rotor-loss-set", rotor_loss_table()?);
     b.insert("default-vs-paper", default_vs_paper_table()?);
+    b.insert("gains", gains_table()?);
     Ok(b)
 }
 
