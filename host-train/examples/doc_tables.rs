@@ -228,6 +228,49 @@ fn gains_table() -> anyhow::Result<String> {
     Ok(out)
 }
 
+/// `paper-spiral`: the README's first table, every controller on paper-spiral with the shipped
+/// blob; the best RMSE over t ≥ 5 s in bold.
+fn paper_spiral_table() -> anyhow::Result<String> {
+    const CONTROLLERS: [&str; 5] = [
+        "pid",
+        "geometric",
+        "geometric-adaptive",
+        "learned",
+        "adaptive",
+    ];
+    let sc = scenario("paper-spiral")?;
+    let mut reports = Vec::new();
+    for c in CONTROLLERS {
+        reports.push((c, flight(&sc, c)?));
+    }
+    let best = reports
+        .iter()
+        .filter(|(_, r)| !r.crashed)
+        .filter_map(|(_, r)| r.rmse_pos_window_m)
+        .fold(f64::INFINITY, f64::min);
+    let mut out = String::from(
+        "| controller | crashed | RMSE t ≥ 5 s (cm) | RMSE whole (cm) | max error (cm) |\n| --- | --- | --- | --- | --- |\n",
+    );
+    for (c, r) in &reports {
+        let crashed = r
+            .crash_time_s
+            .map_or("no".to_string(), |t| format!("yes, at {t:.2} s"));
+        let window = if r.crashed { None } else { r.rmse_pos_window_m };
+        let is_best = window == Some(best);
+        let (name, w) = if is_best {
+            (format!("**{c}**"), format!("**{}**", cm(window)))
+        } else {
+            (c.to_string(), cm(window))
+        };
+        out += &format!(
+            "| {name} | {crashed} | {w} | {} | {} |\n",
+            cm(Some(r.rmse_pos_m)),
+            cm(Some(r.max_err_m))
+        );
+    }
+    Ok(out)
+}
+
 /// Every block this program writes, by name.
 fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
     let mut b = BTreeMap::new();
@@ -235,6 +278,7 @@ fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
     b.insert("rotor-loss-set", rotor_loss_table()?);
     b.insert("default-vs-paper", default_vs_paper_table()?);
     b.insert("gains", gains_table()?);
+    b.insert("paper-spiral", paper_spiral_table()?);
     Ok(b)
 }
 
