@@ -5,7 +5,7 @@ use hamflight::model::ModelWeights;
 use host_train::control::{load_learned, DEFAULT_WEIGHTS};
 use host_train::io::VehicleDescription;
 use host_train::pipeline::{
-    flight_check_scenario_toml, require_flight_check, run_flight_check,
+    flight_check_scenario_spec, require_flight_check, run_flight_check,
     FLIGHT_CHECK_ADAPTIVE_MARGIN,
 };
 use std::path::Path;
@@ -124,15 +124,14 @@ fn the_check_flies_the_described_vehicle() {
         motor_tau_s: Some(0.02),
         description: None,
     };
-    let toml = flight_check_scenario_toml(0.034, &heavy);
-    for key in [
-        "mass_kg = 0.034",
-        "inertia_kg_m2 = [1.82e-5, 1.82e-5, 2.82e-5]",
-        "rotor_efficiency = [1.0, 1.0, 0.9, 1.0]",
-        "motor_tau_s = 0.02",
-    ] {
-        assert!(toml.contains(key), "{key} missing in\n{toml}");
-    }
+    let spec = flight_check_scenario_spec(0.034, &heavy);
+    assert_eq!(spec.vehicle.mass_kg, Some(0.034));
+    assert_eq!(
+        spec.vehicle.inertia_kg_m2,
+        Some([1.82e-5, 1.82e-5, 2.82e-5])
+    );
+    assert_eq!(spec.vehicle.rotor_efficiency, Some([1.0, 1.0, 0.9, 1.0]));
+    assert_eq!(spec.effects.motor_tau_s, 0.02);
     // The stock blob on that vehicle still flies (the adaptation absorbs the mass error).
     let c = run_flight_check(&shipped(), 0.034, &heavy).expect("check runs");
     println!("{c:?}");

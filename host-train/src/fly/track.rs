@@ -9,7 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::adapter::CoreController;
 use crate::sim::plant::PlantState;
-use crate::sim::scenario::Scenario;
+use crate::sim::plant::WindSine;
+use crate::sim::scenario::{Scenario, ScenarioSpec, Trajectory};
 
 /// The wind amplitude of the measurement (m/s², along world x).
 pub const AMPLITUDE_M_S2: f64 = 0.5;
@@ -37,12 +38,18 @@ pub fn compensated_specific_force<M: HamiltonianModel>(
 pub fn sine_wind_scenario(frequency_hz: f64) -> Result<Scenario> {
     let periods = (4.0 * frequency_hz).ceil().max(4.0);
     let duration = SETTLE_S + periods / frequency_hz;
-    let toml = format!(
-        "duration_s = {duration}\n[trajectory]\nkind = \"hover\"\nposition_m = [0.0, 0.0, 1.0]\n\
-         [[disturbance.wind_sines]]\namplitude_m_s2 = [{AMPLITUDE_M_S2}, 0.0, 0.0]\n\
-         frequency_hz = {frequency_hz}\n"
+    let mut spec = ScenarioSpec::new(
+        duration,
+        Trajectory::Hover {
+            position_m: [0.0, 0.0, 1.0],
+        },
     );
-    Scenario::from_toml_str(&toml, "<bandwidth>", "bandwidth")
+    spec.disturbance.wind_sines = vec![WindSine {
+        amplitude_m_s2: [AMPLITUDE_M_S2, 0.0, 0.0],
+        frequency_hz,
+        phase_rad: 0.0,
+    }];
+    Scenario::from_spec("bandwidth", spec)
 }
 
 /// Flies `sc` with `ctrl` in the one SITL loop ([`crate::fly::eval::fly_observed`]) and

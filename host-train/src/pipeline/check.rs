@@ -16,9 +16,9 @@
 use crate::control::adapter::{airframe_of, gains_for, CoreController};
 use crate::fly::eval::{self, Report};
 use crate::io::dataset::VehicleDescription;
-use crate::sim::scenario::Scenario;
+use crate::sim::scenario::{Scenario, ScenarioSpec, Trajectory, VehicleSpec};
 use crate::train::export::{CheckFlight, FlightCheck};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use hamflight::model::{LearnedModel, ModelWeights};
 use hamflight::{AdaptationLaw, Gains};
 
@@ -26,67 +26,82 @@ use hamflight::{AdaptationLaw, Gains};
 /// two are equal to noise when the model already explains the wind.
 pub const ADAPTIVE_MARGIN: f64 = 0.005;
 
-/// The check's scenarios: (name, what is added to the windy spiral).
-pub const CHECK_SCENARIOS: [(&str, &str); 2] = [
-    ("windy spiral", ""),
+/// A rotor fault the check adds to the windy spiral.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RotorFault {
+    /// Each rotor's share of its thrust after the fault.
+    pub rotor_efficiency: [f64; 4],
+    /// When the fault strikes (s).
+    pub onset_s: f64,
+}
+
+/// The check's scenarios: (name, the rotor fault added to the windy spiral).
+pub const CHECK_SCENARIOS: [(&str, Option<RotorFault>); 2] = [
+    ("windy spiral", None),
     (
         "rotor loss",
-        "rotor_efficiency = [1.0, 1.0, 1.0, 0.7]\nonset_s = 3.0\n",
+        Some(RotorFault {
+            rotor_efficiency: [1.0, 1.0, 1.0, 0.7],
+            onset_s: 3.0,
+        }),
     ),
 ];
 
-/// The check scenario's TOML: paper-spiral's path for 8 s under a 0.5 m/s² wind, on the vehicle
-/// of mass `mass_kg` that `vehicle` describes.
-pub fn scenario_toml(mass_kg: f64, vehicle: &VehicleDescription) -> String {
-    let mut s = String::from(
-        "name = \"flight-check\"\n\
-         description = \"the trainer's flight check: paper-spiral's path, 8 s, wind 0.5 m/s²\"\n\
-         duration_s = 8.0\ncontrol_hz = 500.0\nphysics_hz = 1000.0\nseed = 7\nyaw_rad = 0.0\n\
-         [trajectory]\nkind = \"spiral\"\ncenter_m = [0.0, 0.0, 0.5]\nradius_m = 0.5\n\
-         period_s = 10.0\nclimb_m_s = 0.03\n\
-         [disturbance]\nwind_m_s2 = [0.35, 0.35, 0.0]\nonset_s = 0.0\n",
+/// The check scenario: paper-spiral's path for 8 s under a 0.5 m/s² wind, on the vehicle of
+/// mass `mass_kg` that `vehicle` describes.
+pub fn scenario_spec(mass_kg: f64, vehicle: &VehicleDescription) -> ScenarioSpec {
+    let mut s = ScenarioSpec::new(
+        8.0,
+        Trajectory::Spiral {
+            center_m: [0.0, 0.0, 0.5],
+            radius_m: 0.5,
+            period_s: 10.0,
+            climb_m_s: 0.03,
+        },
     );
-    s.push_str(&format!("[vehicle]\nmass_kg = {mass_kg:?}\n"));
-    if let Some(j) = vehicle.inertia_kg_m2 {
-        s.push_str(&format!("inertia_kg_m2 = {j:?}\n"));
-    }
-    if let Some(e) = vehicle.rotor_efficiency {
-        s.push_str(&format!("rotor_efficiency = {e:?}\n"));
-    }
+    s.name = Some("flight-check".into());
+    s.description =
+        Some("the trainer's flight check: paper-spiral's path, 8 s, wind 0.5 m/s²".into());
+    s.seed = 7;
+    s.disturbance.wind_m_s2 = [0.35, 0.35, 0.0];
+    s.vehicle = VehicleSpec {
+        mass_kg: Some(mass_kg),
+        inertia_kg_m2: vehicle.inertia_kg_m2,
+        rotor_efficiency: vehicle.rotor_efficiency,
+        ..VehicleSpec::default()
+    };
     if let Some(d) = &vehicle.description {
-        s.push_str(&format!(
-            "gravity_m_s2 = {:?}\narm_xy_m = {:?}\nkf_n_per_rad_s2 = {:?}\n\
-             km_nm_per_rad_s2 = {:?}\nthrust_to_weight = {:?}\n",
-            d.gravity_m_s2,
-            d.arm_xy_m,
-            d.kf_n_per_rad_s2,
-            d.km_nm_per_rad_s2,
-            d.thrust_to_weight * d.mass_kg / mass_kg
-        ));
+        s.vehicle.gravity_m_s2 = Some(d.gravity_m_s2);
+        s.vehicle.arm_xy_m = Some(d.arm_xy_m);
+        s.vehicle.kf_n_per_rad_s2 = Some(d.kf_n_per_rad_s2);
+        s.vehicle.km_nm_per_rad_s2 = Some(d.km_nm_per_rad_s2);
+        s.vehicle.thrust_to_weight = Some(d.thrust_to_weight * d.mass_kg / mass_kg);
     }
     let tau = vehicle
         .motor_tau_s
         .or(vehicle.description.as_ref().and_then(|d| d.motor_tau_s));
     if let Some(tau) = tau.filter(|t| *t > 0.0) {
-        s.push_str(&format!("[effects]\nmotor_tau_s = {tau:?}\n"));
+        s.effects.motor_tau_s = tau;
     }
     s
 }
 
-/// The check scenario `extra` adds to (a [`CHECK_SCENARIOS`] entry), on the vehicle of mass
+/// The check scenario with `fault` (a [`CHECK_SCENARIOS`] entry), on the vehicle of mass
 /// `mass_kg` that `vehicle` describes.
 ///
 /// # Errors
 /// The scenario does not build (a vehicle description the plant refuses).
-fn check_scenario(mass_kg: f64, vehicle: &VehicleDescription, extra: &str) -> Result<Scenario> {
-    let toml = scenario_toml(mass_kg, vehicle);
-    // The fault goes into the `[disturbance]` table in place of its onset at t = 0.
-    let toml = if extra.is_empty() {
-        toml
-    } else {
-        toml.replacen("onset_s = 0.0\n", extra, 1)
-    };
-    Scenario::from_toml_str(&toml, "the trainer's flight check", "flight-check")
+fn check_scenario(
+    mass_kg: f64,
+    vehicle: &VehicleDescription,
+    fault: Option<RotorFault>,
+) -> Result<Scenario> {
+    let mut spec = scenario_spec(mass_kg, vehicle);
+    if let Some(f) = fault {
+        spec.disturbance.rotor_efficiency = f.rotor_efficiency;
+        spec.disturbance.onset_s = f.onset_s;
+    }
+    Scenario::from_spec("flight-check", spec).context("the trainer's flight check")
 }
 
 /// The first failure among `flights` (in [`CHECK_SCENARIOS`] order, the laws in order), named
@@ -167,8 +182,8 @@ pub fn run_model(
     let base = gains_for(&model);
     let mut flights = Vec::new();
     let mut description = String::new();
-    for (name, extra) in CHECK_SCENARIOS {
-        let sc = check_scenario(mass_kg, vehicle, extra)?;
+    for (name, fault) in CHECK_SCENARIOS {
+        let sc = check_scenario(mass_kg, vehicle, fault)?;
         if description.is_empty() {
             description = sc.spec.description.clone().unwrap_or_default();
         }

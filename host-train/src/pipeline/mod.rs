@@ -3,8 +3,8 @@
 //! Front door: code outside `host-train/src` imports these from here, never from a submodule
 //! (`tools/front-door.py` checks it): [`run_train`] (`train::run`: training, the flight check,
 //! the blob), [`run_train_cli`] (`train::run_cli`: `host-train train`); the flight check's
-//! [`run_flight_check`], [`require_flight_check`], [`flight_check_scenario_toml`],
-//! [`FLIGHT_CHECK_ADAPTIVE_MARGIN`] (`check::{run, require, scenario_toml, ADAPTIVE_MARGIN}`);
+//! [`run_flight_check`], [`require_flight_check`], [`flight_check_scenario_spec`],
+//! [`FLIGHT_CHECK_ADAPTIVE_MARGIN`] (`check::{run, require, scenario_spec, ADAPTIVE_MARGIN}`);
 //! [`run_prior_check`], [`prior_of`]; [`run_score`], [`score_table`], [`ScoreArgs`]
 //! (`score::{run, table}`); [`load_response`]; [`run_vehicle_study`], [`vehicle_study_table`],
 //! [`VehicleStudyArgs`], [`StudyReport`], [`logging_controller`], [`TRUE_COMPOSITE`]
@@ -23,7 +23,7 @@ pub mod vehicle_study;
 // The layer's front door: what code outside host-train/src uses, by these names.
 pub use check::{
     require as require_flight_check, run as run_flight_check,
-    scenario_toml as flight_check_scenario_toml, ADAPTIVE_MARGIN as FLIGHT_CHECK_ADAPTIVE_MARGIN,
+    scenario_spec as flight_check_scenario_spec, ADAPTIVE_MARGIN as FLIGHT_CHECK_ADAPTIVE_MARGIN,
 };
 pub use fit_response::load_response;
 pub use prior_check::{prior_of, run as run_prior_check};

@@ -317,6 +317,31 @@ pub struct ScenarioSpec {
     pub start: Option<StartSpec>,
 }
 
+impl ScenarioSpec {
+    /// A scenario built in code: `trajectory` for `duration_s` seconds, every other key at the
+    /// default a file that leaves it out gets (500 Hz control, 1 kHz physics, seed 0, no
+    /// disturbance, no effects, the CF2X, the true state).
+    pub fn new(duration_s: f64, trajectory: Trajectory) -> Self {
+        Self {
+            name: None,
+            description: None,
+            duration_s,
+            control_hz: default_control_hz(),
+            physics_hz: default_physics_hz(),
+            seed: 0,
+            yaw_rad: 0.0,
+            yaw_rate_rad_s: 0.0,
+            controller: None,
+            trajectory,
+            disturbance: DisturbanceSpec::default(),
+            effects: Effects::default(),
+            vehicle: VehicleSpec::default(),
+            sensors: None,
+            start: None,
+        }
+    }
+}
+
 /// A validated scenario.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scenario {
