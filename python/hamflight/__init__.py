@@ -65,28 +65,25 @@ __all__ = [
 ]
 
 
-def _argv(config: dict) -> list:
-    """Keyword arguments to the CLI's flags: ``epochs=3`` -> ``--epochs 3``; ``True`` -> the
-    bare flag (``no_flight_check=True`` -> ``--no-flight-check``); ``False``/``None`` -> left
-    out; lists and tuples -> comma-separated."""
-    out = []
-    for key, value in config.items():
-        flag = "--" + key.replace("_", "-")
-        if value is None or value is False:
-            continue
-        if value is True:
-            out.append(flag)
-        elif isinstance(value, (list, tuple)):
-            out += [flag, ",".join(str(v) for v in value)]
-        else:
-            out += [flag, str(value)]
-    return out
+def _jsonable(value: Any) -> Any:
+    """The JSON form of what ``json`` does not know: paths as strings, numpy scalars as numbers."""
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if hasattr(value, "item"):
+        return value.item()
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not a valid keyword value")
 
 
-def _run(command: str, argv: list, progress: Optional[Callable[[str], None]]) -> Any:
+def _run(command: str, config: dict, progress: Optional[Callable[[str], None]]) -> Any:
+    """Runs ``command`` on the typed job ``config`` (the CLI's flag names as keys, underscores
+    for dashes; a key left out takes the flag's default). An unknown keyword or a value of the
+    wrong type raises ValueError naming it. ``None`` means the default (the key is left out)."""
+    text = json.dumps({k: v for k, v in config.items() if v is not None}, default=_jsonable)
     if progress is not None:
         progress(f"{command}: started")
-    result = json.loads(_core.run_tool(command, [str(a) for a in argv]))
+    result = json.loads(_core.run_tool(command, text))
     if progress is not None:
         progress(f"{command}: done")
     return result
@@ -96,9 +93,10 @@ def collect(out: PathLike, *, progress: Optional[Callable[[str], None]] = None, 
     """Collect the paper's training dataset with the SITL (``host-train collect``) into ``out``.
 
     ``config`` takes the command's flags as keywords (``realizations=2, windows=100,
-    seed=1``; see ``host-train collect --help``). Returns the dataset's manifest as a dict. The
-    dataset is CSV (``pandas.read_csv(f).groupby("flight")``)."""
-    return _run("collect", ["--out", os.fspath(out)] + _argv(config), progress)
+    seed=1, wind_levels=[0.25, 0.5]``; see ``host-train collect --help``): a typed job, checked
+    before anything runs (an unknown keyword raises ValueError listing the valid ones). Returns
+    the dataset's manifest as a dict. The dataset is CSV (``pandas.read_csv(f).groupby("flight")``)."""
+    return _run("collect", {**config, "out": os.fspath(out)}, progress)
 
 
 def import_logs(
@@ -113,10 +111,13 @@ def import_logs(
     dataset (``host-train import``): one realization per log, airborne flights only; ``calm``
     marks disturbance-free flights. ``config``: the command's flags as keywords (``mass_kg=0.034,
     motor_tau_s=0.02``). Returns one summary dict per log."""
-    argv = ["--out", os.fspath(out)] + [os.fspath(p) for p in logs]
-    for c in calm:
-        argv += ["--calm", os.fspath(c)]
-    return _run("import", argv + _argv(config), progress)
+    job = {
+        **config,
+        "out": os.fspath(out),
+        "logs": [os.fspath(p) for p in logs],
+        "calm": [os.fspath(c) for c in calm],
+    }
+    return _run("import", job, progress)
 
 
 def train(
@@ -128,6 +129,8 @@ def train(
 ) -> dict:
     """Train the Hamiltonian model on a dataset and write the blob ``out`` and ``out.json``
     (``host-train train``). ``config``: the command's flags as keywords (``epochs=5, lr=3e-3,
-    no_flight_check=True, quiet=True``). Returns the training report as a dict; load the blob
-    with :meth:`Blob.load`."""
-    return _run("train", ["--data", os.fspath(data_dir), "--out", os.fspath(out)] + _argv(config), progress)
+    no_flight_check=True, quiet=True``), a typed job (``host_train::train::TrainJob``) checked
+    before training starts: an unknown keyword raises ValueError naming it and listing the valid
+    ones. ``quiet=True`` prints nothing (no progress bar, no summary). Returns the training
+    report as a dict; load the blob with :meth:`Blob.load`."""
+    return _run("train", {**config, "data": os.fspath(data_dir), "out": os.fspath(out)}, progress)

@@ -7,7 +7,7 @@ use hamflight::blob::{self, BlobError as CoreBlobError, CRC_LEN, HEADER_LEN};
 use hamflight::model::LearnedModel;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
+use pyo3::types::{PyBytes, PyTuple};
 
 pyo3::create_exception!(
     _core,
@@ -196,6 +196,13 @@ impl Blob {
         Self::from_parts(py, blob::encode(&w), self.name.clone())
     }
 
+    /// Pickling (and `copy`): the bytes as loaded and the name, checked again on unpickling.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let restore = py.import("hamflight._core")?.getattr("_restore_blob")?;
+        let args = (PyBytes::new(py, &self.bytes), self.name.as_str()).into_pyobject(py)?;
+        PyTuple::new(py, [restore, args.into_any()])
+    }
+
     fn __len__(&self) -> usize {
         self.bytes.len()
     }
@@ -221,6 +228,12 @@ impl Blob {
             self.bytes.len()
         )
     }
+}
+
+/// Unpickles a `Blob` (`Blob.__reduce__`).
+#[pyfunction]
+pub fn _restore_blob(py: Python<'_>, data: Vec<u8>, name: String) -> PyResult<Blob> {
+    Blob::from_parts(py, data, name)
 }
 
 /// The header and trailer sizes (for tests that corrupt blobs on purpose).

@@ -49,5 +49,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sitl::fly, m)?)?;
     m.add_function(wrap_pyfunction!(sitl::controllers, m)?)?;
     m.add_function(wrap_pyfunction!(sitl::run_tool, m)?)?;
+    m.add_function(wrap_pyfunction!(controller::_restore_controller, m)?)?;
+    m.add_function(wrap_pyfunction!(blob::_restore_blob, m)?)?;
     Ok(())
 }

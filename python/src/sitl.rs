@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use clap::Parser;
 use host_train::control::{Controller as HostController, CoreController};
 use host_train::fly::{fly_scenario, FlightLog, Report};
 use host_train::sim::{Scenario as HostScenario, ScenarioSpec};
@@ -264,26 +263,80 @@ pub fn controllers() -> Vec<(String, String)> {
         .collect()
 }
 
-#[derive(Parser)]
-#[command(name = "host-train")]
-enum Tool {
-    Collect(host_train::data::CollectArgs),
-    Import(host_train::data::ImportArgs),
-    Train(host_train::train::TrainArgs),
+/// `text` (a JSON object) as the job `T`, the error a `ValueError` naming the bad key: an
+/// unknown key's lists the valid ones; a mistyped value's names its key. `required` are the keys
+/// the command line requires (the Python functions always pass them).
+fn job<T: serde::de::DeserializeOwned>(
+    command: &str,
+    text: &str,
+    required: &[&str],
+) -> PyResult<T> {
+    let bad = |m: String| PyValueError::new_err(format!("{command}: {m}"));
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| bad(format!("the configuration is not JSON: {e}")))?;
+    let Some(map) = value.as_object() else {
+        return Err(bad("the configuration is not a JSON object".into()));
+    };
+    if let Some(key) = required.iter().find(|k| !map.contains_key(**k)) {
+        return Err(bad(format!("missing `{key}`")));
+    }
+    serde_json::from_value(value.clone()).map_err(|e| {
+        let msg = e.to_string();
+        if msg.starts_with("unknown field") {
+            return bad(msg);
+        }
+        // Name the key: the first that fails on its own (with the required ones).
+        let alone = |k: &String| {
+            let mut one: serde_json::Map<String, serde_json::Value> = required
+                .iter()
+                .filter_map(|r| map.get(*r).map(|v| ((*r).to_owned(), v.clone())))
+                .collect();
+            one.insert(k.clone(), map[k].clone());
+            serde_json::from_value::<T>(serde_json::Value::Object(one)).is_err()
+        };
+        match map.keys().find(|k| alone(k)) {
+            Some(k) => bad(format!("`{k}`: {msg}")),
+            None => bad(msg),
+        }
+    })
 }
 
-/// Runs `host-train collect|import|train` with `argv` (the flags after the command); returns
-/// the command's summary as JSON text. The GIL is released while it runs.
+/// Runs `host-train collect|import|train` on `json_config`, a JSON object with the flags' names
+/// (`out`, `epochs`, ...; a key left out takes the flag's default): it becomes the typed job
+/// ([`host_train::data::CollectJob`], [`host_train::data::ImportJob`],
+/// [`host_train::train::TrainJob`]) and runs through the function the command line calls.
+/// Returns the command's summary as JSON text. The GIL is released while it runs.
 #[pyfunction]
-pub fn run_tool(py: Python<'_>, command: &str, argv: Vec<String>) -> PyResult<String> {
-    let mut full = vec!["host-train".to_string(), command.to_string()];
-    full.extend(argv);
-    let tool = Tool::try_parse_from(&full).map_err(|e| PyValueError::new_err(e.to_string()))?;
+pub fn run_tool(py: Python<'_>, command: &str, json_config: &str) -> PyResult<String> {
+    use host_train::data::{CollectJob, ImportJob};
+    use host_train::train::TrainJob;
+    enum Job {
+        Collect(CollectJob),
+        Import(ImportJob),
+        Train(TrainJob),
+    }
+    let job = match command {
+        "collect" => Job::Collect(job(command, json_config, &["out"])?),
+        "import" => Job::Import(job(command, json_config, &["out"])?),
+        "train" => Job::Train(job(command, json_config, &["data", "out"])?),
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "unknown command {command:?}: expected collect, import or train"
+            )))
+        }
+    };
     py.detach(|| -> anyhow::Result<String> {
-        Ok(match tool {
-            Tool::Collect(a) => serde_json::to_string(&host_train::data::run_collect(&a)?)?,
-            Tool::Import(a) => serde_json::to_string(&host_train::data::run_import(&a)?)?,
-            Tool::Train(a) => serde_json::to_string(&host_train::pipeline::run_train_cli(&a)?)?,
+        Ok(match job {
+            Job::Collect(a) => serde_json::to_string(&host_train::data::run_collect(&a)?)?,
+            Job::Import(a) => serde_json::to_string(&host_train::data::run_import(&a)?)?,
+            // `quiet`: the command line's summary is not printed either (the report is returned).
+            Job::Train(a) if a.quiet => serde_json::to_string(&host_train::pipeline::run_train(
+                &a.config(),
+                &a.data,
+                &a.out,
+                true,
+            )?)?,
+            Job::Train(a) => serde_json::to_string(&host_train::pipeline::run_train_cli(&a)?)?,
         })
     })
     .map_err(err)

@@ -1,5 +1,7 @@
 """hamflight.Blob: load, validate with typed errors, mass, name, CRC, round trip."""
 
+import copy
+import pickle
 import zlib
 
 import numpy as np
@@ -24,6 +26,18 @@ def test_load_and_fields():
     assert b.encode() == data  # the core's encoder writes the same bytes
     assert hamflight.Blob.default() == b  # the built-in copy is the repository's file
     hamflight.Blob.validate(data)
+
+
+def test_pickle_round_trip():
+    b = hamflight.Blob.default().with_mass(0.031)
+    for back in (pickle.loads(pickle.dumps(b)), copy.deepcopy(b)):
+        assert type(back) is hamflight.Blob and back == b
+        assert (back.name, back.mass_kg, back.crc, back.to_bytes()) == (b.name, b.mass_kg, b.crc, b.to_bytes())
+    # A controller on the unpickled blob flies as one on the original.
+    s = ([0, 0, 0.5], np.eye(3), [0, 0, 0], [0, 0, 0], [0.1, 0, 0.5], 0.002)
+    a = hamflight.Controller(b).step(*s)
+    c = hamflight.Controller(pickle.loads(pickle.dumps(b))).step(*s)
+    np.testing.assert_array_equal(a.rpm, c.rpm)
 
 
 def test_with_mass_round_trips():

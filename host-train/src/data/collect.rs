@@ -31,49 +31,53 @@ use crate::sim::plant::{rot_from_rpy, Disturbance, Effects, Plant, PlantState, V
 use crate::sim::trajectory::TrajectoryPoint;
 
 /// Settings of a collection run (defaults: the paper's Sec. 4).
-#[derive(Args, Clone, Debug, PartialEq)]
+///
+/// A key left out of a typed job ([`CollectJob`]) takes the flag's default
+/// ([`CollectConfig::default`], which the flags read too); an unknown key is an error.
+#[derive(Args, Clone, Debug, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct CollectConfig {
     /// Number of disturbance realizations M.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = CollectConfig::default().realizations)]
     pub realizations: usize,
     /// Windows per realization D_j (of `window_len` states, consecutive ones sharing an end
     /// state).
-    #[arg(long, default_value_t = 1080)]
+    #[arg(long, default_value_t = CollectConfig::default().windows)]
     pub windows: usize,
     /// Desired poses per realization; the PID flies from a random start to each in turn, and the
     /// windows are split evenly between them.
-    #[arg(long, default_value_t = 9)]
+    #[arg(long, default_value_t = CollectConfig::default().poses)]
     pub poses: usize,
     /// State sample rate within a window (Hz).
-    #[arg(long, default_value_t = 240.0)]
+    #[arg(long, default_value_t = CollectConfig::default().sample_hz)]
     pub sample_hz: f64,
     /// States per window N: the PID's command is held for N−1 sample intervals.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = CollectConfig::default().window_len)]
     pub window_len: usize,
     /// Physics steps per sample interval (10 → 2400 Hz physics at 240 Hz sampling).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = CollectConfig::default().substeps)]
     pub substeps: usize,
     /// Wind component magnitudes (m/s²) to draw x and y from, each with a random sign.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![0.25, 0.5])]
+    #[arg(long, value_delimiter = ',', default_values_t = CollectConfig::default().wind_levels)]
     pub wind_levels: Vec<f64>,
     /// Lower bound of δ₁, δ₂ ~ U[delta_min, delta_max] (rotors 1 and 2; rotors 3, 4 stay 1).
-    #[arg(long, default_value_t = 0.94)]
+    #[arg(long, default_value_t = CollectConfig::default().delta_min)]
     pub delta_min: f64,
     /// Upper bound of δ₁, δ₂.
-    #[arg(long, default_value_t = 0.98)]
+    #[arg(long, default_value_t = CollectConfig::default().delta_max)]
     pub delta_max: f64,
     /// Half-width (m) of the box around each desired pose from which the start is drawn.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = CollectConfig::default().start_radius_m)]
     pub start_radius_m: f64,
     /// RNG seed; the same seed gives the same files.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = CollectConfig::default().seed)]
     pub seed: u64,
     /// Calm realizations appended after the M disturbed ones: no wind, all rotors at 100 %,
     /// marked disturbance-free (training pins their a_j to 0). Without one, the shared model
     /// and the a_j can trade any constant effect, and the learned g takes up the realizations'
     /// mean thrust deficit (calm-air identifiability, docs/training.md); one anchors g to the calm
     /// vehicle.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = CollectConfig::default().calm_realizations)]
     pub calm_realizations: usize,
 }
 
@@ -105,6 +109,28 @@ pub struct CollectArgs {
     /// Collection settings.
     #[command(flatten)]
     pub config: CollectConfig,
+}
+
+/// A typed data-collection configuration that the CLI (`host-train collect`) and Python
+/// (`hamflight.collect`) both call directly: [`CollectArgs`], built from serde (JSON) instead of
+/// a command line.
+pub type CollectJob = CollectArgs;
+
+/// A typed job ([`CollectJob`]): `out` and the [`CollectConfig`] keys in one map, as the
+/// flags are on the command line (serde's `flatten` would not reject unknown keys).
+impl<'de> serde::Deserialize<'de> for CollectArgs {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut map = serde_json::Map::deserialize(d)?;
+        let out = map
+            .remove("out")
+            .ok_or_else(|| D::Error::missing_field("out"))?;
+        Ok(Self {
+            out: PathBuf::deserialize(out).map_err(D::Error::custom)?,
+            config: CollectConfig::deserialize(serde_json::Value::Object(map))
+                .map_err(D::Error::custom)?,
+        })
+    }
 }
 
 fn check_config(c: &CollectConfig) -> Result<()> {

@@ -61,7 +61,7 @@ pub mod tensor_model;
 
 use anyhow::{bail, Result};
 use hamflight::model::{FEATURES, HIDDEN};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub use export::TrainReport;
@@ -90,7 +90,7 @@ pub use tensor_model::{to_vec as tensor_to_vec, Consts, Forcing, TModel};
 
 /// Where the training loss's gradient comes from. Recorded in [`TrainConfig::gradient`] and so in
 /// the training report.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum GradientPath {
     /// The hand-fused f32 kernel ([`fused`]); where it declines a shape, burn's autodiff, with a
@@ -326,8 +326,12 @@ fn blob_motor_tau_s(
     Ok(tau)
 }
 
-/// `host-train train`: the command-line face of [`crate::pipeline::train::run`].
-#[derive(clap::Args, Debug, Clone)]
+/// `host-train train`: the command-line face of [`crate::pipeline::train::run`]; also
+/// [`TrainJob`], the same arguments as a typed (serde) job. A key left out takes the
+/// command line's default ([`TrainArgs::default`], which reads what the flags' defaults read);
+/// an unknown key is an error.
+#[derive(clap::Args, Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct TrainArgs {
     /// Dataset directory written by `host-train collect` or `host-train import`.
     #[arg(long, value_name = "DIR")]
@@ -437,6 +441,48 @@ pub struct TrainArgs {
     pub quiet: bool,
 }
 
+/// A typed training configuration that the CLI (`host-train train`) and Python
+/// (`hamflight.train`) both call directly: [`TrainArgs`], built from serde (JSON) instead of a
+/// command line.
+pub type TrainJob = TrainArgs;
+
+impl Default for TrainArgs {
+    /// The command line's defaults (from [`TrainConfig::default`], as the flags'), with empty
+    /// `data` and `out` (which the command line requires).
+    fn default() -> Self {
+        let c = TrainConfig::default();
+        let w = crate::io::dataset::WindowSpec::default();
+        Self {
+            data: std::path::PathBuf::new(),
+            out: std::path::PathBuf::new(),
+            epochs: c.epochs,
+            lr: c.lr,
+            batch: c.batch,
+            seed: c.seed,
+            hidden: HIDDEN,
+            features: FEATURES,
+            heldout: c.heldout_frac,
+            data_frac: c.data_frac,
+            vel_weight: c.vel_weight,
+            warmup_epochs: c.warmup_epochs,
+            patience: c.patience,
+            feature_decay: c.feature_decay,
+            window_len: w.len,
+            stride: w.stride,
+            mass_kg: None,
+            feature_epochs: c.feature_epochs,
+            no_flight_rotor_gains: false,
+            no_flight_check: false,
+            no_feature_backoff: false,
+            motor_tau_s: None,
+            free_gain: false,
+            pin_rigid_body: false,
+            gradient: None,
+            quiet: false,
+        }
+    }
+}
+
 impl TrainArgs {
     /// The configuration these arguments describe.
     pub fn config(&self) -> TrainConfig {
@@ -491,5 +537,27 @@ pub fn to_hover_feature_basis(trained: &mut epochs::Trained) {
     for a in trained.a.iter_mut() {
         let v = t_inv * nalgebra::SVector::<f32, FEATURES>::from(*a);
         *a = v.into();
+    }
+}
+
+#[cfg(test)]
+mod args_tests {
+    use super::TrainArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: TrainArgs,
+    }
+
+    /// The typed job's defaults are the command line's.
+    #[test]
+    fn serde_defaults_are_the_flags_defaults() {
+        let cli = Cli::try_parse_from(["train", "--data", "d", "--out", "o.hfw"]).unwrap();
+        let job: TrainArgs = serde_json::from_str(r#"{"data": "d", "out": "o.hfw"}"#).unwrap();
+        assert_eq!(format!("{:?}", cli.args), format!("{job:?}"));
+        let err = serde_json::from_str::<TrainArgs>(r#"{"epoch": 3}"#).unwrap_err();
+        assert!(err.to_string().contains("epoch"), "{err}");
     }
 }

@@ -103,7 +103,8 @@ pub use csv::decode_csv;
 pub use usd::decode_usd;
 
 /// Input format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LogFormat {
     /// By content: a first byte 0xBC is a uSD log, anything else CSV.
     Auto,
@@ -113,8 +114,11 @@ pub enum LogFormat {
     Csv,
 }
 
-/// Arguments of `host-train import`.
-#[derive(Args, Clone, Debug)]
+/// Arguments of `host-train import`; also [`ImportJob`], the same arguments as a typed
+/// (serde) job: a key left out takes the flag's default ([`ImportArgs::default`], which the
+/// flags read too), an unknown key is an error.
+#[derive(Args, Clone, Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ImportArgs {
     /// Output dataset directory (created if missing).
     #[arg(long, value_name = "DIR")]
@@ -168,21 +172,21 @@ pub struct ImportArgs {
     #[arg(long, value_delimiter = ',', default_values_t = LEE_COMMAND_VARS.map(String::from))]
     pub command_vars: Vec<String>,
     /// Airborne only at or above this height (m, world z).
-    #[arg(long, default_value_t = 0.10)]
+    #[arg(long, default_value_t = ImportArgs::default().min_height_m)]
     pub min_height_m: f64,
     /// Airborne only with a commanded thrust of at least this fraction of m g.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = ImportArgs::default().min_thrust_frac)]
     pub min_thrust_frac: f64,
     /// Seconds cut from both ends of every airborne stretch (take-off, landing).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = ImportArgs::default().trim_s)]
     pub trim_s: f64,
     /// Gaps in the log (dropped packets, removed repeated states) up to this long stay inside
     /// one flight; longer ones end it. Training never integrates across a gap either way.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = ImportArgs::default().max_gap_s)]
     pub max_gap_s: f64,
     /// Low thrust counts as landed only when the vehicle also stays still (speed under
     /// 0.1 m/s) this long: an aggressive descent at low thrust is still flight.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = ImportArgs::default().min_ground_s)]
     pub min_ground_s: f64,
     /// Decode uSD logs whose CRC does not match (for example cut short by a power loss).
     #[arg(long)]
@@ -199,11 +203,27 @@ impl ImportArgs {
     pub fn new(out: PathBuf, mass_kg: f64) -> Self {
         Self {
             out,
+            mass_kg: Some(mass_kg),
+            ..Self::default()
+        }
+    }
+}
+
+/// A typed log-import configuration that the CLI (`host-train import`) and Python
+/// (`hamflight.import_logs`) both call directly: [`ImportArgs`], built from serde (JSON) instead
+/// of a command line.
+pub type ImportJob = ImportArgs;
+
+impl Default for ImportArgs {
+    /// The command line's defaults (the flags read them), with no `out`, logs or mass.
+    fn default() -> Self {
+        Self {
+            out: PathBuf::new(),
             logs: Vec::new(),
             calm: Vec::new(),
             format: LogFormat::Auto,
             vehicle: None,
-            mass_kg: Some(mass_kg),
+            mass_kg: None,
             gravity_m_s2: None,
             inertia_kg_m2: None,
             rotor_efficiency: None,
