@@ -20,7 +20,7 @@ import sys
 import zlib
 
 H = 16
-S_J, EPS = 1.0e5, 1.0e-2  # INERTIA_INV_SCALE_PER_KG_M2, INERTIA_INV_EPS (src/model/learned.rs)
+S_J, EPS = 1.0e5, 1.0e-2  # INERTIA_INV_SCALE_PER_KG_M2, INERTIA_INV_EPS (src/model/learned/mod.rs)
 
 
 def mlp(i, o, out_bias):

@@ -477,7 +477,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("elf", nargs="?")
     ap.add_argument("--by", default="func",
-                    help="func | func2 | line:FILE[:FUNC,...] (e.g. line:src/adapt.rs:kalman)")
+                    help="func | func2 | line:FILE[:FUNC,...] (e.g. line:src/adapt/composite.rs:kalman)")
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--timeout", type=int, default=900)
     ap.add_argument("--summary", action="store_true",
