@@ -13,10 +13,14 @@ its dict: ``Scenario.from_dict({**s.to_dict(), "seed": 3})``.
 The repository's scenario files are inside the package (:mod:`hamflight.data`): a relative
 ``"scenarios/NAME.toml"`` that does not exist from the working directory is read from there, so
 the paths above work outside a checkout.
+
+:class:`Plant` is the same quadrotor stepped by the caller (``reset``, ``step_rpm``,
+``step_wrench``, ``observation``, ``reference``), for a policy of your own;
+:class:`hamflight.env.QuadrotorEnv` wraps it as a Gymnasium-style environment.
 """
 
 from __future__ import annotations
 
-from ._core import FlightResult, Scenario, controllers, fly
+from ._core import FlightResult, Plant, Scenario, controllers, fly
 
-__all__ = ["Scenario", "FlightResult", "fly", "controllers"]
+__all__ = ["Scenario", "FlightResult", "Plant", "fly", "controllers"]

@@ -6,6 +6,7 @@
 mod arrays;
 mod blob;
 mod controller;
+mod plant;
 mod sitl;
 
 use std::path::PathBuf;
@@ -45,6 +46,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BLOB_HEADER_LEN", blob::LAYOUT.0)?;
     m.add("BLOB_CRC_LEN", blob::LAYOUT.1)?;
     m.add_class::<sitl::Scenario>()?;
+    m.add_class::<plant::Plant>()?;
     m.add_class::<sitl::FlightResult>()?;
     m.add_function(wrap_pyfunction!(sitl::fly, m)?)?;
     m.add_function(wrap_pyfunction!(sitl::controllers, m)?)?;
