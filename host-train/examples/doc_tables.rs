@@ -285,14 +285,15 @@ fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
 const OPEN: &str = "<!-- generated: ";
 const CLOSE: &str = "<!-- end generated: ";
 
-/// The page with every block replaced by `blocks`' text; the names it held.
+/// The page with every block replaced by `blocks`' text; the blocks it held, by name, with the
+/// text the page had for each.
 fn rewrite(
     page: &str,
     text: &str,
     blocks: &BTreeMap<&str, String>,
-) -> anyhow::Result<(String, Vec<String>)> {
+) -> anyhow::Result<(String, Vec<(String, String)>)> {
     let mut out = String::new();
-    let mut names = Vec::new();
+    let mut found = Vec::new();
     let mut rest = text;
     while let Some(i) = rest.find(OPEN) {
         let after = &rest[i + OPEN.len()..];
@@ -311,15 +312,17 @@ fn rewrite(
                 blocks.keys().collect::<Vec<_>>()
             )
         })?;
+        let old = &rest[body_start..body_start + j];
+        let old = old.strip_prefix('\n').unwrap_or(old).to_string();
         out += &rest[..body_start];
         out += "\n";
         out += body;
         out += &close;
         rest = &rest[body_start + j + close.len()..];
-        names.push(name);
+        found.push((name, old));
     }
     out += rest;
-    Ok((out, names))
+    Ok((out, found))
 }
 
 fn first_difference(a: &str, b: &str) -> String {
@@ -354,20 +357,14 @@ fn main() -> anyhow::Result<()> {
     for page in PAGES {
         let path = root().join(page);
         let text = std::fs::read_to_string(&path)?;
-        let (new, names) = rewrite(page, &text, &blocks)?;
+        let (new, found) = rewrite(page, &text, &blocks)?;
+        let names: Vec<&str> = found.iter().map(|(n, _)| n.as_str()).collect();
         if new != text {
             if write {
                 host_train::io::write_atomic(&path, new.as_bytes())?;
                 eprintln!("doc_tables: rewrote {page} ({})", names.join(", "));
             } else {
-                // Name the first block that differs.
-                for name in &names {
-                    let open = format!("{OPEN}{name} -->\n");
-                    let close = format!("{CLOSE}{name} -->");
-                    let page_block = text
-                        .split_once(&open)
-                        .and_then(|(_, b)| b.split_once(&close))
-                        .map_or("", |(b, _)| b);
+                for (name, page_block) in &found {
                     let code_block = blocks.get(name.as_str()).map_or("", String::as_str);
                     if page_block != code_block {
                         stale.push(format!(
@@ -378,7 +375,7 @@ fn main() -> anyhow::Result<()> {
                 }
             }
         }
-        seen.extend(names);
+        seen.extend(found.into_iter().map(|(n, _)| n));
     }
     for name in blocks.keys() {
         if !seen.iter().any(|s| s == name) {
