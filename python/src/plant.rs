@@ -12,7 +12,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::sitl::Scenario;
+use crate::sitl::{reference_dict, Scenario};
 
 /// The observation's length: position (m, world), velocity (m/s, world), R (body → world,
 /// row-major), body rates (rad/s).
@@ -125,19 +125,15 @@ impl Plant {
         Ok(self.observation(py))
     }
 
-    /// The scenario's reference at `t_s` (default: now): `p_m`, `v_m_s`, `a_m_s2` (world) and
-    /// `yaw_rad`.
+    /// The scenario's reference at `t_s` (default: now), as `Scenario.reference` gives it.
     #[pyo3(signature = (t_s=None))]
     fn reference<'py>(&self, py: Python<'py>, t_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
-        let r = self
-            .scenario
-            .reference(t_s.unwrap_or_else(|| self.plant.t_s()));
-        let d = PyDict::new(py);
-        d.set_item("p_m", PyArray1::from_slice(py, r.p_m.as_slice()))?;
-        d.set_item("v_m_s", PyArray1::from_slice(py, r.v_m_s.as_slice()))?;
-        d.set_item("a_m_s2", PyArray1::from_slice(py, r.a_m_s2.as_slice()))?;
-        d.set_item("yaw_rad", r.yaw_rad)?;
-        Ok(d)
+        reference_dict(
+            py,
+            &self
+                .scenario
+                .reference(t_s.unwrap_or_else(|| self.plant.t_s())),
+        )
     }
 
     /// Simulated time (s).

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use host_train::control::{Controller as HostController, CoreController};
 use host_train::fly::{fly_scenario, FlightLog, Report};
-use host_train::sim::{Scenario as HostScenario, ScenarioSpec};
+use host_train::sim::{Scenario as HostScenario, ScenarioSpec, TrajectoryPoint};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -26,6 +26,18 @@ fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
         .import("json")?
         .call_method1("dumps", (obj,))?
         .extract()
+}
+
+/// A reference point as a dict: p_m, v_m_s, a_m_s2, j_m_s3 (world) and yaw_rad, yaw_rate_rad_s.
+pub fn reference_dict<'py>(py: Python<'py>, r: &TrajectoryPoint) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("p_m", PyArray1::from_slice(py, r.p_m.as_slice()))?;
+    d.set_item("v_m_s", PyArray1::from_slice(py, r.v_m_s.as_slice()))?;
+    d.set_item("a_m_s2", PyArray1::from_slice(py, r.a_m_s2.as_slice()))?;
+    d.set_item("j_m_s3", PyArray1::from_slice(py, r.j_m_s3.as_slice()))?;
+    d.set_item("yaw_rad", r.yaw_rad)?;
+    d.set_item("yaw_rate_rad_s", r.yaw_rate_rad_s)?;
+    Ok(d)
 }
 
 /// A validated scenario (the TOML files of `scenarios/`).
@@ -95,15 +107,7 @@ impl Scenario {
     /// The reference at time t: dict of p_m, v_m_s, a_m_s2, j_m_s3 (world) and yaw_rad,
     /// yaw_rate_rad_s.
     fn reference<'py>(&self, py: Python<'py>, t_s: f64) -> PyResult<Bound<'py, PyDict>> {
-        let r = self.s.reference(t_s);
-        let d = PyDict::new(py);
-        d.set_item("p_m", PyArray1::from_slice(py, r.p_m.as_slice()))?;
-        d.set_item("v_m_s", PyArray1::from_slice(py, r.v_m_s.as_slice()))?;
-        d.set_item("a_m_s2", PyArray1::from_slice(py, r.a_m_s2.as_slice()))?;
-        d.set_item("j_m_s3", PyArray1::from_slice(py, r.j_m_s3.as_slice()))?;
-        d.set_item("yaw_rad", r.yaw_rad)?;
-        d.set_item("yaw_rate_rad_s", r.yaw_rate_rad_s)?;
-        Ok(d)
+        reference_dict(py, &self.s.reference(t_s))
     }
 
     fn __repr__(&self) -> String {
