@@ -8,7 +8,8 @@ and its TOML scenario files, from Python.
 ``fly`` takes a scenario (a :class:`Scenario` or a path) and a controller: a name
 (:func:`controllers` lists them; the learned ones fly the shipped blob unless ``weights`` is
 given) or a :class:`hamflight.Controller` (a fresh copy of it flies). To vary a scenario, edit
-its dict: ``Scenario.from_dict({**s.to_dict(), "seed": 3})``.
+its dict: ``Scenario.from_dict({**s.to_dict(), "seed": 3})``. A :class:`Scenario` pickles (for
+multiprocessing and Ray) to an equal one that flies bit for bit as the original.
 
 The repository's scenario files are inside the package (:mod:`hamflight.data`): a relative
 ``"scenarios/NAME.toml"`` that does not exist from the working directory is read from there, so

@@ -53,5 +53,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sitl::run_tool, m)?)?;
     m.add_function(wrap_pyfunction!(controller::_restore_controller, m)?)?;
     m.add_function(wrap_pyfunction!(blob::_restore_blob, m)?)?;
+    m.add_function(wrap_pyfunction!(sitl::_restore_scenario, m)?)?;
     Ok(())
 }

@@ -9,7 +9,8 @@ use host_train::sim::{Scenario as HostScenario, ScenarioSpec, TrajectoryPoint};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType};
+use serde_json::Value;
 
 use crate::controller::{core_names, named, AnyModel, Controller};
 
@@ -21,11 +22,64 @@ fn json_loads<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'py, PyAny>> {
     py.import("json")?.call_method1("loads", (text,))
 }
 
-fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
-    obj.py()
-        .import("json")?
-        .call_method1("dumps", (obj,))?
-        .extract()
+/// `obj` as a JSON value, its floats exactly (no decimal text in between, so a dict that
+/// `to_dict` gave comes back bit for bit): dicts with string keys, lists and tuples, strings,
+/// ints, floats, bools and None, as `json.dumps` takes them; numpy arrays and scalars as their
+/// `tolist()`. `at` names the key in errors (`disturbance.wind_m_s2[0]`).
+fn json_value(obj: &Bound<'_, PyAny>, at: &str) -> PyResult<Value> {
+    let bad = |what: &str| {
+        let at = if at.is_empty() { "the spec" } else { at };
+        PyValueError::new_err(format!("bad scenario: {at}: {what}"))
+    };
+    let key = |k: &str| {
+        if at.is_empty() {
+            k.to_owned()
+        } else {
+            format!("{at}.{k}")
+        }
+    };
+    if obj.is_none() {
+        Ok(Value::Null)
+    } else if let Ok(b) = obj.cast::<PyBool>() {
+        Ok(Value::Bool(b.is_true()))
+    } else if let Ok(i) = obj.cast::<PyInt>() {
+        if let Ok(v) = i.extract::<i64>() {
+            Ok(v.into())
+        } else {
+            Ok(i.extract::<u64>()
+                .map_err(|_| bad("integer out of range"))?
+                .into())
+        }
+    } else if let Ok(f) = obj.cast::<PyFloat>() {
+        serde_json::Number::from_f64(f.value())
+            .map(Value::Number)
+            .ok_or_else(|| bad("not a finite number"))
+    } else if let Ok(s) = obj.cast::<PyString>() {
+        Ok(Value::String(s.extract()?))
+    } else if let Ok(d) = obj.cast::<PyDict>() {
+        let mut map = serde_json::Map::new();
+        for (k, v) in d.iter() {
+            let k: String = k.extract().map_err(|_| bad("keys must be strings"))?;
+            let v = json_value(&v, &key(&k))?;
+            map.insert(k, v);
+        }
+        Ok(Value::Object(map))
+    } else if obj.cast::<PyList>().is_ok() || obj.cast::<PyTuple>().is_ok() {
+        obj.try_iter()?
+            .enumerate()
+            .map(|(i, v)| json_value(&v?, &format!("{at}[{i}]")))
+            .collect::<PyResult<Vec<_>>>()
+            .map(Value::Array)
+    } else if obj.hasattr("tolist")? && !obj.is_instance_of::<PyType>() {
+        let plain = obj.call_method0("tolist")?;
+        if plain.hasattr("tolist")? {
+            return Err(bad("tolist() gave no plain value"));
+        }
+        json_value(&plain, at)
+    } else {
+        let ty = obj.get_type().name()?;
+        Err(bad(&format!("{ty} is not a JSON value")))
+    }
 }
 
 /// A reference point as a dict: p_m, v_m_s, a_m_s2, j_m_s3 (world) and yaw_rad, yaw_rate_rad_s.
@@ -72,8 +126,7 @@ impl Scenario {
     #[staticmethod]
     #[pyo3(signature = (spec, name=None))]
     fn from_dict(spec: &Bound<'_, PyAny>, name: Option<&str>) -> PyResult<Self> {
-        let text = json_dumps(spec)?;
-        let spec: ScenarioSpec = serde_json::from_str(&text)
+        let spec: ScenarioSpec = serde_json::from_value(json_value(spec, "")?)
             .map_err(|e| PyValueError::new_err(format!("bad scenario: {e}")))?;
         let name = name
             .map(str::to_owned)
@@ -110,12 +163,53 @@ impl Scenario {
         reference_dict(py, &self.s.reference(t_s))
     }
 
+    /// Pickling (and ``copy``, multiprocessing, Ray): the name, the file it was read from (the
+    /// flight's report names it) and the keys as ``to_dict`` gives them, validated again on
+    /// unpickling; the copy flies exactly as the original.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let restore = py.import("hamflight._core")?.getattr("_restore_scenario")?;
+        let args = (
+            self.s.name.as_str(),
+            self.s.path.as_deref(),
+            self.to_dict(py)?,
+        )
+            .into_pyobject(py)?;
+        PyTuple::new(py, [restore, args.into_any()])
+    }
+
+    /// Equal when every key, the name and the file are (floats compared exactly).
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other
+            .cast::<Scenario>()
+            .map(|o| o.get().s == self.s)
+            .unwrap_or(false)
+    }
+
+    fn __hash__(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        self.s.name.hash(&mut h);
+        h.finish()
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Scenario(name={:?}, duration_s={}, control_hz={})",
             self.s.name, self.s.spec.duration_s, self.s.spec.control_hz
         )
     }
+}
+
+/// Unpickles a `Scenario` (`Scenario.__reduce__`).
+#[pyfunction]
+pub fn _restore_scenario(
+    name: &str,
+    path: Option<PathBuf>,
+    spec: &Bound<'_, PyAny>,
+) -> PyResult<Scenario> {
+    let mut s = Scenario::from_dict(spec, Some(name))?;
+    s.s.path = path;
+    Ok(s)
 }
 
 fn scenario_arg(obj: &Bound<'_, PyAny>) -> PyResult<HostScenario> {

@@ -1,7 +1,10 @@
 """hamflight.sitl: scenario files flown from Python, the log as numpy arrays."""
 
+import copy
 import json
+import pickle
 import subprocess
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -57,6 +60,65 @@ def test_scenarios_round_trip_through_dicts_and_toml():
         sitl.Scenario.from_dict({**d, "bogus": 1})
     with pytest.raises(ValueError, match="scenario"):
         sitl.Scenario.load(SCEN / "nonexistent.toml")
+
+
+# The report's scores that are not wall-clock measurements.
+WALL = {"wall_s", "sim_speed", "control_step_us"}
+
+
+def same_flight(a, b):
+    for k in ("t_s", "p_m", "p_ref_m", "err_m", "rpm", "adaptation"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k), err_msg=k)
+    ra, rb = ({k: v for k, v in r.items() if k not in WALL} for r in (a.report, b.report))
+    assert ra == rb
+    assert set(a.report) - set(ra) == WALL  # the wall-clock keys are the only ones left out
+
+
+def test_every_shipped_scenario_pickles_to_an_equal_one():
+    names = hamflight.data.scenarios()
+    assert len(names) > 10
+    for name in names:
+        s = sitl.Scenario.load(name)
+        for back in (pickle.loads(pickle.dumps(s)), copy.deepcopy(s), copy.copy(s)):
+            assert type(back) is sitl.Scenario and back is not s
+            assert back == s and hash(back) == hash(s), name
+            assert (back.name, back.duration_s, back.control_hz, repr(back)) == (s.name, s.duration_s, s.control_hz, repr(s))
+            assert back.to_dict() == s.to_dict(), name
+    assert sitl.Scenario.load("hover") != sitl.Scenario.load("hover-wind")
+    assert sitl.Scenario.load("hover") != "hover"
+
+
+def test_an_unpickled_scenario_flies_as_the_original():
+    s = sitl.Scenario.load(SCEN / "rotor-loss-mid.toml")
+    back = pickle.loads(pickle.dumps(s))
+    a, b = sitl.fly(s, "adaptive-composite"), sitl.fly(back, "adaptive-composite")
+    assert b.report["scenario_file"] == str(SCEN / "rotor-loss-mid.toml")  # the file is carried
+    same_flight(a, b)
+    # An edited scenario (no file) with floats that have no short decimal form, through a
+    # process boundary as multiprocessing and Ray send it.
+    d = s.to_dict()
+    d["disturbance"]["wind_m_s2"] = [0.1 + 0.2, np.float32(0.3), -1 / 3]
+    d["seed"] = np.int64(7)
+    edited = sitl.Scenario.from_dict(d, name="edited")
+    assert edited.to_dict()["disturbance"]["wind_m_s2"] == [0.1 + 0.2, float(np.float32(0.3)), -1 / 3]  # exact
+    with ProcessPoolExecutor(1) as pool:
+        remote = pool.submit(pickle.dumps, edited).result()
+    back = pickle.loads(remote)
+    assert back == edited and back.name == "edited" and back.to_dict()["seed"] == 7
+    a, b = sitl.fly(edited, "adaptive"), sitl.fly(back, "adaptive")
+    assert a.report["scenario_file"] is None
+    same_flight(a, b)
+    assert not np.array_equal(a.p_m, sitl.fly(s, "adaptive").p_m)  # the edit mattered
+
+
+def test_bad_dict_values_are_named():
+    d = sitl.Scenario.load("hover").to_dict()
+    with pytest.raises(ValueError, match=r"duration_s: not a finite number"):
+        sitl.Scenario.from_dict({**d, "duration_s": float("nan")})
+    with pytest.raises(ValueError, match=r"disturbance\.wind_m_s2\[1\]: object is not a JSON value"):
+        sitl.Scenario.from_dict({**d, "disturbance": {**d["disturbance"], "wind_m_s2": [0.0, object(), 0.0]}})
+    with pytest.raises(ValueError, match=r"keys must be strings"):
+        sitl.Scenario.from_dict({**d, 1: 2})
 
 
 def test_sitl_scores_equal_host_train_eval(bridge_binary, tmp_path):
