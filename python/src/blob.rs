@@ -13,8 +13,9 @@ pyo3::create_exception!(
     _core,
     BlobError,
     PyValueError,
-    "A weight blob was rejected. `kind` names the check that failed (Truncated, BadMagic, \
-     UnsupportedVersion, ShapeMismatch, Checksum, TrailingBytes, Malformed, NonFinite, BadMass)."
+    "A weight blob was rejected (a ValueError); `kind` names the failed check: Truncated,\n\
+     BadMagic, UnsupportedVersion, ShapeMismatch, Checksum, TrailingBytes, Malformed, NonFinite,\n\
+     BadMass, BadMotorTau, BadPort. The message names the file and the problem."
 );
 
 /// The shipped blob (`weights/default.hfw` when this package was built).
@@ -87,6 +88,10 @@ pub fn default_model() -> PyResult<Arc<LearnedModel>> {
 }
 
 /// A checked weight blob: the learned model's networks and the vehicle's mass.
+///
+/// `Blob.load(path)`, `Blob.from_bytes(data)` or `Blob.default()`; a rejected blob raises
+/// `BlobError`. A `Controller` takes one (or its path or bytes) as `weights`. Blobs compare by
+/// their bytes (`==`, `hash` is the CRC) and pickle as them.
 #[pyclass(module = "hamflight._core", frozen)]
 pub struct Blob {
     pub model: Arc<LearnedModel>,
@@ -107,8 +112,9 @@ impl Blob {
 
 #[pymethods]
 impl Blob {
-    /// Reads and checks a blob file (str or os.PathLike); a relative `weights/default.hfw` that
-    /// is not there is the package's copy (`hamflight.data`).
+    /// Reads and checks a blob file (str or os.PathLike); raises BlobError (or OSError) naming
+    /// the problem. A relative `weights/default.hfw` that does not exist is the package's copy
+    /// (`hamflight.data`).
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
         let path = crate::packaged_or(py, path, "weights");
@@ -125,7 +131,7 @@ impl Blob {
         Self::from_parts(py, bytes, name)
     }
 
-    /// Checks a blob held in memory.
+    /// Checks a blob held in memory; `name` is what `name` and the errors call it.
     #[staticmethod]
     #[pyo3(signature = (data, name="<bytes>"))]
     fn from_bytes(py: Python<'_>, data: Vec<u8>, name: &str) -> PyResult<Self> {
@@ -179,7 +185,7 @@ impl Blob {
         hamflight::model::ModelWeights::PARAMS
     }
 
-    /// The blob's bytes as loaded.
+    /// The blob's bytes as loaded (`Blob.from_bytes(b.to_bytes()) == b`).
     fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
         PyBytes::new(py, &self.bytes)
     }
@@ -196,13 +202,15 @@ impl Blob {
         Self::from_parts(py, blob::encode(&w), self.name.clone())
     }
 
-    /// Pickling (and `copy`): the bytes as loaded and the name, checked again on unpickling.
+    /// Pickling (and `copy`, multiprocessing, Ray): the bytes as loaded and the name, checked
+    /// again on unpickling.
     fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
         let restore = py.import("hamflight._core")?.getattr("_restore_blob")?;
         let args = (PyBytes::new(py, &self.bytes), self.name.as_str()).into_pyobject(py)?;
         PyTuple::new(py, [restore, args.into_any()])
     }
 
+    /// The blob's size in bytes.
     fn __len__(&self) -> usize {
         self.bytes.len()
     }

@@ -1,7 +1,9 @@
 //! `hamflight._core`: the native module of the `hamflight` Python package. It wraps the very f32
 //! core the firmware runs (`hamflight`), and the host crate (`host-train`) for the SITL plant,
 //! the scenario files and the data and training commands. The Python-facing documentation is in
-//! `hamflight/__init__.py`, `hamflight/_core.pyi` and `docs/python.md`.
+//! `hamflight/__init__.py`, `hamflight/_core.pyi` and `docs/python.md`, and in the `///` comments
+//! of the `#[pyclass]`es, `#[pymethods]` and `#[pyfunction]`s: they are the docstrings `help()`
+//! shows, and `_core.pyi` repeats them word for word (`tests/test_docstrings.py`).
 
 mod arrays;
 mod blob;

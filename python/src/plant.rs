@@ -18,7 +18,12 @@ use crate::sitl::{reference_dict, Scenario};
 /// row-major), body rates (rad/s).
 pub const OBSERVATION_LEN: usize = 18;
 
-/// The quadrotor of a scenario (its vehicle, wind, faults and effects), stepped by the caller.
+/// The SITL quadrotor of a scenario (its vehicle, wind, faults and effects), stepped by the
+/// caller (`hamflight.env.QuadrotorEnv` wraps it).
+///
+/// `Plant(scenario)` starts at the scenario's initial state at t = 0. Observations are 18
+/// floats: position (m, world), velocity (m/s, world), R (body -> world, row-major), body rates
+/// (rad/s).
 #[pyclass(module = "hamflight._core", unsendable)]
 pub struct Plant {
     scenario: HostScenario,
@@ -61,7 +66,6 @@ impl Plant {
 
 #[pymethods]
 impl Plant {
-    /// The plant of `scenario`, at its initial state and t = 0.
     #[new]
     fn new(scenario: &Scenario) -> Self {
         let s = scenario.s.clone();

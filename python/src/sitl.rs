@@ -94,7 +94,12 @@ pub fn reference_dict<'py>(py: Python<'py>, r: &TrajectoryPoint) -> PyResult<Bou
     Ok(d)
 }
 
-/// A validated scenario (the TOML files of `scenarios/`).
+/// A validated scenario (the TOML files of scenarios/): duration, rates, seed, reference
+/// trajectory, disturbance, effects, vehicle, sensors, start.
+///
+/// `Scenario.load(path)`, `Scenario.from_toml(text)` or `Scenario.from_dict(spec)`; `to_dict()`
+/// gives the keys to edit. Fly it with `sitl.fly`, or step it with `sitl.Plant`. Scenarios
+/// compare equal when every key, the name and the file are, and pickle.
 #[pyclass(module = "hamflight._core", frozen, skip_from_py_object)]
 #[derive(Clone)]
 pub struct Scenario {
@@ -103,8 +108,9 @@ pub struct Scenario {
 
 #[pymethods]
 impl Scenario {
-    /// Reads and validates a scenario file; a relative `scenarios/NAME.toml` (or `NAME.toml`,
-    /// `NAME`) that is not there is the package's copy (`hamflight.data`).
+    /// Reads and validates a scenario file (ValueError naming the problem otherwise). A relative
+    /// `scenarios/NAME.toml` (or `NAME.toml`, `NAME`) that does not exist is the package's copy
+    /// (`hamflight.data`).
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
         let path = crate::packaged_or(py, path, "scenarios");
@@ -113,7 +119,7 @@ impl Scenario {
         })
     }
 
-    /// Parses scenario TOML text.
+    /// Parses and validates scenario TOML text; `name` names it when the text has no `name`.
     #[staticmethod]
     #[pyo3(signature = (text, name="scenario"))]
     fn from_toml(text: &str, name: &str) -> PyResult<Self> {
@@ -122,7 +128,9 @@ impl Scenario {
         })
     }
 
-    /// A scenario from a dict with the file's keys (as `to_dict` gives them).
+    /// A scenario from a dict with the file's keys (as `to_dict` gives them), validated;
+    /// `name` overrides the dict's. Floats are taken exactly; a bad key or value raises
+    /// ValueError naming it.
     #[staticmethod]
     #[pyo3(signature = (spec, name=None))]
     fn from_dict(spec: &Bound<'_, PyAny>, name: Option<&str>) -> PyResult<Self> {
@@ -144,14 +152,17 @@ impl Scenario {
         json_loads(py, &text)
     }
 
+    /// The `name` key, else the file's stem (or the name given).
     #[getter]
     fn name(&self) -> &str {
         &self.s.name
     }
+    /// The flight's length (s).
     #[getter]
     fn duration_s(&self) -> f64 {
         self.s.spec.duration_s
     }
+    /// The control rate (Hz).
     #[getter]
     fn control_hz(&self) -> f64 {
         self.s.spec.control_hz
@@ -163,8 +174,8 @@ impl Scenario {
         reference_dict(py, &self.s.reference(t_s))
     }
 
-    /// Pickling (and ``copy``, multiprocessing, Ray): the name, the file it was read from (the
-    /// flight's report names it) and the keys as ``to_dict`` gives them, validated again on
+    /// Pickling (and `copy`, multiprocessing, Ray): the name, the file it was read from (the
+    /// flight's report names it) and the keys as `to_dict` gives them, validated again on
     /// unpickling; the copy flies exactly as the original.
     fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
         let restore = py.import("hamflight._core")?.getattr("_restore_scenario")?;
@@ -240,7 +251,11 @@ fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> 
     Ok(fly_scenario(scenario, ctrl.as_mut()))
 }
 
-/// A flown flight: the log as numpy arrays and the scores of `report.json`.
+/// A flown SITL flight: per-tick numpy arrays and report.json's scores.
+///
+/// t_s (n,), p_m and p_ref_m (n, 3), err_m (n,), rpm (n, 4), adaptation (n, 6) or (n, 0);
+/// `report` is the dict `host-train eval` writes as report.json, `rmse_m` and `crashed` two of
+/// its scores.
 #[pyclass(module = "hamflight._core", frozen)]
 pub struct FlightResult {
     /// Tick times (s), (n,).
@@ -276,6 +291,7 @@ impl FlightResult {
             .get_item("rmse_pos_window_m")?
             .extract()
     }
+    /// The error exceeded 1 m, z went below 0 or the state became non-finite.
     #[getter]
     fn crashed(&self, py: Python<'_>) -> PyResult<bool> {
         self.report.bind(py).get_item("crashed")?.extract()
@@ -317,8 +333,11 @@ fn result(py: Python<'_>, log: &FlightLog, scenario: &HostScenario) -> PyResult<
     })
 }
 
-/// Flies `scenario` (a Scenario or a path) with `controller`: a name (the core's, `pid`,
-/// `geometric`) or a hamflight.Controller (a copy flies; its estimate starts from zero). The
+/// Flies `scenario` (a Scenario or a path) with `controller`; returns a FlightResult.
+///
+/// `controller`: a name (the core's, `pid`, `geometric`; `controllers()` lists them; default
+/// "adaptive") or a hamflight.Controller (a copy flies; its estimate starts from zero).
+/// `weights` (a blob, its path or bytes) replaces the shipped blob for the learned names. The
 /// GIL is released during the flight.
 #[pyfunction]
 #[pyo3(signature = (scenario, controller=None, weights=None))]
@@ -353,7 +372,8 @@ pub fn fly(
     result(py, &log, &sc)
 }
 
-/// The registry's names, with a line each ([`host_train::control::controllers`]).
+/// The registry's controllers as (name, description) pairs: the core's (`CONTROLLER_NAMES`),
+/// `pid` and `geometric`.
 #[pyfunction]
 pub fn controllers() -> Vec<(String, String)> {
     host_train::control::controllers()
@@ -401,8 +421,8 @@ fn job<T: serde::de::DeserializeOwned>(
 
 /// Runs `host-train collect|import|train` on `json_config`, a JSON object with the flags' names
 /// (`out`, `epochs`, ...; a key left out takes the flag's default): it becomes the typed job
-/// ([`host_train::data::CollectJob`], [`host_train::data::ImportJob`],
-/// [`host_train::train::TrainJob`]) and runs through the function the command line calls.
+/// (`host_train::data::CollectJob`, `host_train::data::ImportJob`,
+/// `host_train::train::TrainJob`) and runs through the function the command line calls.
 /// Returns the command's summary as JSON text. The GIL is released while it runs.
 #[pyfunction]
 pub fn run_tool(py: Python<'_>, command: &str, json_config: &str) -> PyResult<String> {

@@ -15,23 +15,34 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::arrays::{leading_dim, read_vec};
 
-/// The outputs of one batched step, one row per vehicle.
+/// One batched step, one row per vehicle (float32; bool for the flags).
+///
+/// Row i is what `Controller.step` gives vehicle i: rpm and rotor_thrust_n (N, 4), thrust_n
+/// (N,), torque_nm (N, 3), a (N, 6), and the flags fault, saturated, tilt_limited (N,).
 #[pyclass(module = "hamflight._core", frozen)]
 pub struct BatchResult {
+    /// Rotor speed commands, rotors 1..4 (rpm), float32 (N, 4).
     #[pyo3(get)]
     rpm: Py<PyArray2<f32>>,
+    /// Rotor thrust commands (N), float32 (N, 4).
     #[pyo3(get)]
     rotor_thrust_n: Py<PyArray2<f32>>,
+    /// Collective thrust to command (N), float32 (N,).
     #[pyo3(get)]
     thrust_n: Py<PyArray1<f32>>,
+    /// Body torques to command (N·m), float32 (N, 3).
     #[pyo3(get)]
     torque_nm: Py<PyArray2<f32>>,
+    /// The disturbance-weight estimates, float32 (N, 6).
     #[pyo3(get)]
     a: Py<PyArray2<f32>>,
+    /// The output was forced to motors off (`Faults.fault`), bool (N,).
     #[pyo3(get)]
     fault: Py<PyArray1<bool>>,
+    /// The mixer saturated (`Faults.saturated`), bool (N,).
     #[pyo3(get)]
     saturated: Py<PyArray1<bool>>,
+    /// The tilt limit shaped the desired attitude (`Faults.tilt_limited`), bool (N,).
     #[pyo3(get)]
     tilt_limited: Py<PyArray1<bool>>,
 }
@@ -47,6 +58,11 @@ impl BatchResult {
 }
 
 /// N independent controllers stepped by one call on arrays of N states.
+///
+/// `ControllerBatch(n, weights, law=..., adapt=..., **gains)`: `n` controllers on the same
+/// model and gains, as the `Controller` constructor takes them; or
+/// `ControllerBatch(controllers=[...])`: copies of the given controllers, their estimates
+/// included. Row i of a step equals what a `Controller` would give. `len(batch)` is N.
 #[pyclass(module = "hamflight._core")]
 pub struct ControllerBatch {
     ctrls: Vec<FlightController<AnyModel>>,
@@ -110,8 +126,6 @@ fn batch_setpoint(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<BatchSetpoint> {
 
 #[pymethods]
 impl ControllerBatch {
-    /// `n` controllers on the same model and gains (the constructor of `Controller`), or
-    /// copies of the given controllers (`controllers=[...]`, their estimates included).
     #[new]
     #[pyo3(signature = (n=None, weights=None, *, controllers=None, law="composite", adapt=true, **gains))]
     fn new(
@@ -141,13 +155,16 @@ impl ControllerBatch {
         })
     }
 
+    /// N, the number of controllers.
     fn __len__(&self) -> usize {
         self.ctrls.len()
     }
 
-    /// One step of every controller: p (N, 3), R (N, 3, 3), v_body (N, 3), w_body (N, 3);
-    /// setpoint one `Setpoint` for all, positions (N, 3) or a dict of arrays with the bridge's
-    /// keys (p (N, 3), v, a, j, yaw (N,), yaw_rate); dt a float or (N,); acc None or (N, 3).
+    /// One step of every controller; returns a BatchResult.
+    ///
+    /// p (N, 3), R (N, 3, 3), v_body (N, 3), w_body (N, 3); setpoint one Setpoint for all,
+    /// positions (N, 3) or a dict of arrays with the bridge's keys (p (N, 3), v, a, j, yaw (N,),
+    /// yaw_rate); dt a float or (N,); acc None or (N, 3).
     #[pyo3(signature = (p, R, v_body, w_body, setpoint, dt, acc=None))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn step<'py>(

@@ -85,7 +85,15 @@ pub(super) fn measurement(acc: Option<&Bound<'_, PyAny>>) -> PyResult<Measuremen
     })
 }
 
-/// The exact f32 flight core: learned or nominal model, IDA-PBC law, adaptation, mixer.
+/// The exact f32 flight core: model, IDA-PBC law, adaptation, mixer.
+///
+/// `weights`: None for the nominal CF2X model (with its hand-chosen features), or a blob (path,
+/// bytes or Blob) for the learned model. `law`: "composite" (the default) or "gradient" (the
+/// paper's); `adapt=False` turns the adaptation off. Gains as keywords (see GAIN_KEYWORDS):
+/// k_p_n_per_m, k_v_n_s_per_m, k_r_nm_per_rad, k_w_nm_s_per_rad, max_tilt_rad,
+/// shaping_omega_rad_s, the adaptation rates c_p, c_v, c_r, c_w (feature units), a_max, and
+/// motor_tau_s (the lag the composite law assumes); the ones left out are the core's for the
+/// vehicle the model carries. `Controller.named(NAME)` gives the bridge's controllers.
 #[pyclass(module = "hamflight._core")]
 pub struct Controller {
     pub inner: FlightController<AnyModel>,
@@ -163,8 +171,9 @@ impl Controller {
         })
     }
 
-    /// The controller `host-train bridge --controller NAME` runs (the shipped weights unless
-    /// `weights` is given for the learned ones), with optional gain overrides.
+    /// The controller `host-train bridge --controller NAME` runs (CONTROLLER_NAMES; the shipped
+    /// weights unless `weights` is given for the learned ones), with optional gain overrides as
+    /// keywords.
     #[staticmethod]
     #[pyo3(signature = (name, weights=None, **gains))]
     fn named(
@@ -181,9 +190,9 @@ impl Controller {
         })
     }
 
-    /// Pickling (and `copy`): the name, the model (its blob bytes, re-encoded by the core's
-    /// encoder; None for the nominal model) and the gains. The adaptation estimate and the
-    /// filters are not carried: the copy starts as after `reset()`.
+    /// Pickling (and `copy`, multiprocessing, Ray): the name, the model (its blob bytes,
+    /// re-encoded by the core's encoder; None for the nominal model) and the gains. The
+    /// adaptation estimate and the filters are not carried: the copy starts as after `reset()`.
     fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
         let restore = py
             .import("hamflight._core")?
@@ -202,7 +211,14 @@ impl Controller {
         PyTuple::new(py, [restore, args.into_any()])
     }
 
-    /// One control step.
+    /// One control step; returns a StepResult (rotor commands, wrench, estimate, faults).
+    ///
+    /// p (3,) m world; R (3, 3) body->world; v_body (3,) m/s and w_body (3,) rad/s in the body
+    /// frame; setpoint a Setpoint, a position (3,) or a dict with the bridge's keys; dt s; acc
+    /// the accelerometer's specific force (3,) m/s^2 body, or None. Arrays are float64 or
+    /// float32 (or sequences), cast to f32 as the bridge casts them; another shape or dtype
+    /// raises ValueError naming the argument. A bad state, setpoint or dt is not an exception:
+    /// the motors go off and `faults.fault` is set.
     #[pyo3(signature = (p, R, v_body, w_body, setpoint, dt, acc=None))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn step(
@@ -262,7 +278,7 @@ impl Controller {
         self.inner.model().mass_kg()
     }
 
-    /// "learned" or "nominal".
+    /// The model: "learned" (from a blob) or "nominal".
     #[getter]
     fn model(&self) -> &'static str {
         match self.inner.model() {
@@ -271,6 +287,7 @@ impl Controller {
         }
     }
 
+    /// The name: the registry's (`named`), else the model's and the law's (`adaptive-composite`).
     #[getter]
     fn name(&self) -> &str {
         &self.name

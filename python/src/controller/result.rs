@@ -5,7 +5,12 @@ use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// Faults and conditions of one step.
+/// Faults and conditions of one step; any of the first four forces motors off.
+///
+/// bad_state, bad_setpoint, bad_dt and numeric are faults: the output is motors off and `fault`
+/// (also `bool(faults)`) is set. saturated (the mixer's saturated_yaw, saturated_roll_pitch,
+/// saturated_thrust) and tilt_limited are conditions: the output is still used. `to_dict()` is
+/// the bridge's `faults` object.
 #[pyclass(module = "hamflight._core", frozen, skip_from_py_object)]
 #[derive(Clone, Copy)]
 pub struct Faults {
@@ -19,38 +24,47 @@ impl Faults {
     fn fault(&self) -> bool {
         self.f.is_fault()
     }
+    /// The state had a NaN or infinite component, or its R is not a rotation.
     #[getter]
     fn bad_state(&self) -> bool {
         self.f.bad_state
     }
+    /// The setpoint had a NaN or infinite component.
     #[getter]
     fn bad_setpoint(&self) -> bool {
         self.f.bad_setpoint
     }
+    /// dt was not in (0, 0.1] s.
     #[getter]
     fn bad_dt(&self) -> bool {
         self.f.bad_dt
     }
+    /// The model or the law produced a non-finite or singular value.
     #[getter]
     fn numeric(&self) -> bool {
         self.f.numeric
     }
+    /// The mixer saturated (any of the three below; a condition, the output is still used).
     #[getter]
     fn saturated(&self) -> bool {
         self.f.saturation.any()
     }
+    /// The yaw torque was scaled down to keep roll/pitch authority.
     #[getter]
     fn saturated_yaw(&self) -> bool {
         self.f.saturation.yaw
     }
+    /// The roll/pitch torques were scaled down (not even they fit).
     #[getter]
     fn saturated_roll_pitch(&self) -> bool {
         self.f.saturation.roll_pitch
     }
+    /// The collective thrust was shifted to fit the torques between the limits.
     #[getter]
     fn saturated_thrust(&self) -> bool {
         self.f.saturation.thrust
     }
+    /// The tilt limit shaped the desired attitude (a condition).
     #[getter]
     fn tilt_limited(&self) -> bool {
         self.f.tilt_limited
@@ -68,6 +82,7 @@ impl Faults {
         d.set_item("tilt_limited", self.f.tilt_limited)?;
         Ok(d)
     }
+    /// `fault`.
     fn __bool__(&self) -> bool {
         self.f.is_fault()
     }
@@ -94,7 +109,11 @@ pub(super) fn py_bool(b: bool) -> &'static str {
     }
 }
 
-/// What one `Controller.step` gives: the wrench, the rotor commands, a and the faults (f32).
+/// One step's output (float32, as the core computes it): what `Controller.step` returns.
+///
+/// The rotor commands (`rpm`, `rotor_thrust_n`), the wrench to command (`thrust_n`,
+/// `torque_nm`, `wrench`), the disturbance-weight estimate `a`, the position error `e_p` and
+/// the `faults`.
 #[pyclass(module = "hamflight._core", frozen)]
 pub struct StepResult {
     pub(super) out: Output,
@@ -112,7 +131,7 @@ impl StepResult {
     fn rotor_thrust_n<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, &self.out.rotors.thrust_n)
     }
-    /// Collective thrust to command (N): the wrench a mixer should be handed.
+    /// Collective thrust to command (N): what a mixer should be handed.
     #[getter]
     fn thrust_n(&self) -> f32 {
         self.out.command.thrust_n
@@ -142,6 +161,7 @@ impl StepResult {
     fn e_p<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, self.out.errors.e_p.as_slice())
     }
+    /// The step's faults and conditions.
     #[getter]
     fn faults(&self) -> Faults {
         Faults { f: self.out.faults }

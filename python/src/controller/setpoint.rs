@@ -9,7 +9,11 @@ use pyo3::types::PyDict;
 
 use crate::arrays::read3;
 
-/// A setpoint: desired position and its derivatives (world frame) and yaw.
+/// Desired position p* (m), velocity (m/s), acceleration (m/s^2), jerk (m/s^3), all world
+/// frame, and yaw (rad) and yaw rate (rad/s).
+///
+/// The derivatives left out are zero. `Controller.step` also takes a position (3,) (held at yaw
+/// 0) or a dict with the bridge's keys (`p`, `v`, `a`, `j`, `yaw`, `yaw_rate`) in its place.
 #[pyclass(module = "hamflight._core", frozen, skip_from_py_object)]
 #[derive(Clone)]
 pub struct Setpoint {
@@ -51,26 +55,32 @@ impl Setpoint {
         })
     }
 
+    /// Desired position (m, world), float32 (3,).
     #[getter]
     fn p_m<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, self.sp.p_m.as_slice())
     }
+    /// Desired velocity (m/s, world), float32 (3,).
     #[getter]
     fn v_m_s<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, self.sp.v_m_s.as_slice())
     }
+    /// Desired acceleration (m/s^2, world), float32 (3,).
     #[getter]
     fn a_m_s2<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, self.sp.a_m_s2.as_slice())
     }
+    /// Desired jerk (m/s^3, world), float32 (3,).
     #[getter]
     fn j_m_s3<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
         PyArray1::from_slice(py, self.sp.j_m_s3.as_slice())
     }
+    /// Desired yaw (rad).
     #[getter]
     fn yaw_rad(&self) -> f32 {
         self.sp.yaw_rad
     }
+    /// Desired yaw rate (rad/s).
     #[getter]
     fn yaw_rate_rad_s(&self) -> f32 {
         self.sp.yaw_rate_rad_s
