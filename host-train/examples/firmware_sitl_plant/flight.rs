@@ -12,21 +12,57 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use host_train::{Plant, PlantState, Scenario};
-use nalgebra::Vector3;
-
-use crate::crtp::{
-    ext_pose_packet, imu_packet, param_answer, param_toc_request, param_write_float,
-    position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, Console, Firmware, FromFirmware,
+use host_train::io::{
+    ext_pose_packet, full_state_setpoint_packet, imu_packet, param_toc_request, param_write_float,
+    parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, CRTP_HANDSHAKE,
     CRTP_PORT_SIM,
 };
-use crate::record::{plot, write_csv, Sample};
-use crate::Args;
+use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
-/// Smooth 0 → 1 over [0, 1] (zero velocity at both ends).
-fn smoothstep(u: f64) -> f64 {
-    let u = u.clamp(0.0, 1.0);
-    u * u * (3.0 - 2.0 * u)
+use crate::crtp::{param_answer, Console, Firmware, FromFirmware};
+use crate::record::{plot, write_csv, Sample};
+use crate::{Args, SetpointKind};
+
+/// Smooth 0 → 1 over [0, 1] (zero velocity at both ends), with its first and second derivatives.
+fn smoothstep(u: f64) -> (f64, f64, f64) {
+    if !(0.0..=1.0).contains(&u) {
+        return (u.clamp(0.0, 1.0), 0.0, 0.0);
+    }
+    (u * u * (3.0 - 2.0 * u), 6.0 * u * (1.0 - u), 6.0 - 12.0 * u)
+}
+
+/// A smooth move from `a` to `b` over `dur_s`, at `t_s` into it: position, velocity, acceleration.
+fn smooth_move(
+    a: Vector3<f64>,
+    b: Vector3<f64>,
+    dur_s: f64,
+    t_s: f64,
+    yaw: f64,
+) -> TrajectoryPoint {
+    let (s, ds, dds) = smoothstep(t_s / dur_s);
+    TrajectoryPoint {
+        p_m: a + (b - a) * s,
+        v_m_s: (b - a) * (ds / dur_s),
+        a_m_s2: (b - a) * (dds / (dur_s * dur_s)),
+        j_m_s3: Vector3::zeros(),
+        yaw_rad: yaw,
+        yaw_rate_rad_s: 0.0,
+    }
+}
+
+/// Every time-based disturbance of the plant moved `offset_s` later: the scenario's clock starts
+/// when the hold does, as in `host-train eval`, where the flight starts at p*(0).
+fn delay_disturbances(plant: &mut Plant, offset_s: f64) {
+    plant.disturbance.wind_onset_s += offset_s;
+    plant.disturbance.efficiency_onset_s += offset_s;
+    for s in &mut plant.wind_variation.steps {
+        s.from_s += offset_s;
+        s.until_s = s.until_s.map(|u| u + offset_s);
+    }
+    for s in &mut plant.wind_variation.sines {
+        s.phase_rad -= core::f64::consts::TAU * s.frequency_hz * offset_s;
+    }
 }
 
 pub fn run() -> Result<()> {
@@ -87,17 +123,15 @@ pub fn run() -> Result<()> {
                 let d = &buf[..n];
                 let mut sh = shared.lock().unwrap();
                 if sh.fw_addr.is_none() {
-                    if d == [0xF3] {
-                        let _ = sock.send_to(&[0xF3], addr);
+                    if d == [CRTP_HANDSHAKE] {
+                        let _ = sock.send_to(&[CRTP_HANDSHAKE], addr);
                         sh.fw_addr = Some(addr);
                     }
                     continue;
                 }
                 if n > 0 && d[0] >> 4 == CRTP_PORT_SIM {
-                    if n == 9 {
-                        for (i, m) in sh.pwm.iter_mut().enumerate() {
-                            *m = u16::from_le_bytes([d[1 + 2 * i], d[2 + 2 * i]]);
-                        }
+                    if let Some(pwm) = parse_motor(d) {
+                        sh.pwm = pwm;
                         sh.motor_packets += 1;
                     }
                     continue;
@@ -206,6 +240,11 @@ pub fn run() -> Result<()> {
     let mut airborne_once = false;
     let mut crash: Option<(f64, String)> = None;
     let mut touchdown_speed: Option<f64> = None;
+    // After a lost link: the speed and tilt at which the vehicle reached the ground.
+    let mut fall: Option<(f64, f64)> = None;
+    // After a lost link, until the motors stop: the largest distance from where the link was lost.
+    let mut drift_m = 0.0f64;
+    let mut lost_p: Option<Vector3<f64>> = None;
     let mut stop_sent = 0u32;
     let loop_start = Instant::now();
     let mut deadline = loop_start;
@@ -219,6 +258,10 @@ pub fn run() -> Result<()> {
     let mut toc_last_req: (u16, u64) = (u16::MAX, 0);
     let mut mixer_done_at: Option<f64> = None;
     let mut engage_at: Option<f64> = None;
+    let mut hold_started_at: Option<f64> = None;
+    let mut link_lost_at: Option<f64> = None;
+    let mut motors_off_at: Option<f64> = None;
+    let setpoint_every = ((1000.0 / args.setpoint_hz).round() as u64).max(1);
     let total_guard_s = 60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s;
     loop {
         let t = plant.t_s();
@@ -291,33 +334,53 @@ pub fn run() -> Result<()> {
             }
         }
         // The flight's timeline, from the engage time.
-        let (phase, setpoint): (&'static str, Option<Vector3<f64>>) = match engage_at {
+        let (phase, setpoint): (&'static str, Option<TrajectoryPoint>) = match engage_at {
             None if stab_started_at.is_none() => ("boot", None),
             None => ("settle", None),
             Some(t_engage) => {
                 let te = t - t_engage;
                 let hold_end = args.takeoff_s + hold_s;
                 let land_end = hold_end + args.land_s;
-                let hold_p = |tau: f64| scenario.reference(tau.clamp(0.0, hold_s)).p_m;
+                let hold_ref = |tau: f64| scenario.reference(tau.clamp(0.0, hold_s));
+                let top = hold_ref(hold_s).p_m;
+                let bottom = Vector3::new(top.x, top.y, -0.05);
                 if te < args.takeoff_s {
-                    let a = smoothstep(te / args.takeoff_s);
-                    ("takeoff", Some(ground_xy + (target0.p_m - ground_xy) * a))
+                    let sp = smooth_move(ground_xy, target0.p_m, args.takeoff_s, te, yaw0);
+                    ("takeoff", Some(sp))
                 } else if te < hold_end {
-                    ("hold", Some(hold_p(te - args.takeoff_s)))
+                    ("hold", Some(hold_ref(te - args.takeoff_s)))
                 } else if te < land_end {
-                    let a = smoothstep((te - hold_end) / args.land_s);
-                    let top = hold_p(hold_s);
-                    let bottom = Vector3::new(top.x, top.y, -0.05);
-                    ("land", Some(top + (bottom - top) * a))
+                    let sp = smooth_move(top, bottom, args.land_s, te - hold_end, yaw0);
+                    ("land", Some(sp))
                 } else if te < land_end + 1.0 {
-                    let top = hold_p(hold_s);
-                    ("landed", Some(Vector3::new(top.x, top.y, -0.05)))
+                    ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
                 } else if te < land_end + 2.0 {
                     ("stop", None)
                 } else {
                     break;
                 }
             }
+        };
+        if phase == "hold" && hold_started_at.is_none() {
+            hold_started_at = Some(t);
+            delay_disturbances(&mut plant, t);
+        }
+        // The radio link: lost from `--link-loss-s` into the hold (setpoints and pose alike:
+        // with cflib, motion capture reaches the vehicle over the same radio).
+        let link_up = match (args.link_loss_s, hold_started_at) {
+            (Some(l), Some(h0)) => t < h0 + l,
+            _ => true,
+        };
+        if !link_up && link_lost_at.is_none() {
+            link_lost_at = Some(t);
+        }
+        if link_lost_at.is_some() && motors_off_at.is_none() && pwm == [0; 4] {
+            motors_off_at = Some(t);
+        }
+        let phase = if link_lost_at.is_some() {
+            "link lost"
+        } else {
+            phase
         };
         if phase == "takeoff" && engage_wall.is_none() {
             engage_wall = Some(Instant::now());
@@ -339,7 +402,9 @@ pub fn run() -> Result<()> {
             if !on_ground && airborne_once && touchdown_speed.is_none() {
                 touchdown_speed = Some(-vz);
                 let tilt = s.rot[(2, 2)].clamp(-1.0, 1.0).acos().to_degrees();
-                if (-vz > 1.0 || tilt > 30.0) && crash.is_none() {
+                if motors_off_at.is_some() {
+                    fall = Some((-vz, tilt));
+                } else if (-vz > 1.0 || tilt > 30.0) && crash.is_none() {
                     crash = Some((
                         t,
                         format!("hit the ground at {:.2} m/s, tilt {tilt:.0} deg", -vz),
@@ -357,6 +422,10 @@ pub fn run() -> Result<()> {
             }
             on_ground = false;
         }
+        if link_lost_at.is_some() && motors_off_at.is_none() {
+            let p0 = *lost_p.get_or_insert(s.p_m);
+            drift_m = drift_m.max((s.p_m - p0).norm());
+        }
         if !s.is_finite() {
             crash.get_or_insert((t, "non-finite state".into()));
             break;
@@ -364,8 +433,8 @@ pub fn run() -> Result<()> {
         if s.rot[(2, 2)] < 0.0 {
             crash.get_or_insert((t, "upside down".into()));
         }
-        if let Some(sp) = setpoint {
-            if (s.p_m - sp).norm() > 2.0 {
+        if let (Some(sp), None) = (&setpoint, link_lost_at) {
+            if (s.p_m - sp.p_m).norm() > 2.0 {
                 crash.get_or_insert((t, "more than 2 m from the setpoint".into()));
             }
         }
@@ -378,14 +447,26 @@ pub fn run() -> Result<()> {
         };
         let imu = imu_packet(acc / g, s.w_body_rad_s.map(f64::to_degrees));
         let _ = sock.send_to(&imu, fw_addr);
-        if k.is_multiple_of(10) {
-            let _ = sock.send_to(&ext_pose_packet(&s), fw_addr);
+        if k.is_multiple_of(10) && link_up {
+            let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(s.rot));
+            let _ = sock.send_to(&ext_pose_packet(&s.p_m, &q), fw_addr);
         }
-        if k % 20 == 5 {
-            match setpoint {
+        if k % setpoint_every == 5 % setpoint_every && link_up {
+            match &setpoint {
                 Some(sp) => {
-                    let _ =
-                        sock.send_to(&position_setpoint_packet(&sp, yaw0.to_degrees()), fw_addr);
+                    let pk = match args.setpoint {
+                        SetpointKind::FullState => full_state_setpoint_packet(
+                            &sp.p_m,
+                            &sp.v_m_s,
+                            &sp.a_m_s2,
+                            sp.yaw_rad,
+                            sp.yaw_rate_rad_s,
+                        ),
+                        SetpointKind::Position => {
+                            position_setpoint_packet(&sp.p_m, sp.yaw_rad.to_degrees())
+                        }
+                    };
+                    let _ = sock.send_to(&pk, fw_addr);
                 }
                 None if phase == "stop" && stop_sent < 5 => {
                     let _ = sock.send_to(&stop_setpoint_packet(), fw_addr);
@@ -399,7 +480,11 @@ pub fn run() -> Result<()> {
                 t_s: plant.t_s(),
                 phase,
                 p: s.p_m,
-                sp: setpoint.unwrap_or(Vector3::new(f64::NAN, f64::NAN, f64::NAN)),
+                sp: setpoint.as_ref().map(|sp| sp.p_m).unwrap_or(Vector3::new(
+                    f64::NAN,
+                    f64::NAN,
+                    f64::NAN,
+                )),
                 rpy_deg: s.rpy().map(f64::to_degrees),
                 pwm,
                 wall_s: loop_start.elapsed().as_secs_f64(),
@@ -522,6 +607,17 @@ pub fn run() -> Result<()> {
             .map(|v| format!("{v:.2} m/s"))
             .unwrap_or_else(|| "-".into())
     );
+    if let Some(tl) = link_lost_at {
+        let off = motors_off_at.map(|t| format!("{:.3} s after", t - tl));
+        println!(
+            "link lost at plant t = {tl:.3} s ({} s into the hold): motors stopped {}; drift until then {:.1} cm; reached the ground at {}",
+            args.link_loss_s.unwrap_or(0.0),
+            off.unwrap_or_else(|| "NEVER".into()),
+            drift_m * 100.0,
+            fall.map(|(v, tilt)| format!("{v:.2} m/s, tilt {tilt:.0} deg"))
+                .unwrap_or_else(|| "- (still airborne)".into())
+        );
+    }
     match &crash {
         Some((t, why)) => println!("CRASHED at plant t = {t:.2} s: {why}"),
         None => println!(
@@ -548,6 +644,10 @@ pub fn run() -> Result<()> {
     );
     if crash.is_some() || !airborne_once {
         std::process::exit(3);
+    }
+    if link_lost_at.is_some() && motors_off_at.is_none() {
+        // the supervisor's watchdog must stop the motors after a lost link
+        std::process::exit(4);
     }
     Ok(())
 }

@@ -90,9 +90,39 @@ struct Args {
     /// thrustToTorque 0.005964552 m) instead of setting them to the scenario vehicle's.
     #[arg(long)]
     stock_mixer: bool,
+    /// The setpoint cflib streams: `full-state` (`send_full_state_setpoint`: the reference's
+    /// position, velocity, acceleration, yaw and yaw rate) or `position`
+    /// (`send_position_setpoint`: position and yaw only, no feed-forward).
+    #[arg(long, value_enum, default_value_t = SetpointKind::FullState)]
+    setpoint: SetpointKind,
+    /// Setpoints per second (cflib users stream 10–100 Hz).
+    #[arg(long, default_value_t = 100.0, value_parser = positive_hz)]
+    setpoint_hz: f64,
+    /// Lose the radio link this many seconds into the hold: no setpoint and no pose from then on
+    /// (with cflib, motion capture reaches the vehicle over the same link). Bitcraze's supervisor
+    /// levels the vehicle after 0.5 s without a setpoint and stops the motors after 2 s; exit 4 if
+    /// the motors never stop.
+    #[arg(long)]
+    link_loss_s: Option<f64>,
     /// Directory for flight.csv, flight.svg, console.log.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,
+}
+
+/// The setpoint type streamed over the generic commander.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SetpointKind {
+    /// Generic commander type 6: position, velocity and acceleration, attitude, rates.
+    FullState,
+    /// Generic commander type 7: position and yaw.
+    Position,
+}
+
+fn positive_hz(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x > 0.0 && x <= 1000.0 => Ok(x),
+        _ => Err(format!("{s}: a rate in (0, 1000] Hz")),
+    }
 }
 
 fn main() {

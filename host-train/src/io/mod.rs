@@ -1,4 +1,5 @@
-//! Files (layer 1): atomic writing, the flight log, the uSD-card deck log and the dataset.
+//! Files and links (layer 1): atomic writing, the flight log, the uSD-card deck log, the dataset
+//! and CrazySim's UDP link to the SITL Crazyflie firmware (`crtp`).
 //!
 //! Front door: code outside `host-train/src` imports these from here, never from a submodule
 //! (`tools/front-door.py` checks it): [`write_atomic`], [`write_json_atomic`]; [`FlightLog`];
@@ -9,14 +10,27 @@
 //! load_manifest, save, windows, segments, FORMAT, FORMAT_V1, CSV_HEADER}`); the uSD log's
 //! [`parse_usd`] (`usdlog::parse`), [`ParseOptions`], [`UsdError`], [`UsdWriter`], [`Var`],
 //! [`VarType`], [`EventType`], [`crc32`], [`FIXED_FREQUENCY_ID`], [`LEE_COMMAND_VARS`],
-//! [`USD_STATE_VARS`], [`USD_ACC_VARS`].
+//! [`USD_STATE_VARS`], [`USD_ACC_VARS`]; the firmware link's packets ([`imu_packet`], [`parse_motor`],
+//! [`full_state_setpoint_packet`], [`CrtpSetpoint`], ...: the list below).
 
+pub mod crtp;
 pub mod dataset;
 pub mod files;
 pub mod flightlog;
 pub mod usdlog;
 
 // The layer's front door: what code outside host-train/src uses, by these names.
+pub use crtp::{
+    ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header, imu_packet,
+    motor_packet, param_toc_request, param_write_float, parse_ext_pose, parse_imu, parse_motor,
+    parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
+    position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress, quat_decompress,
+    stop_setpoint_packet, ParamAnswer, Setpoint as CrtpSetpoint, DEG_PER_LSB as IMU_DEG_PER_LSB,
+    G_PER_LSB as IMU_G_PER_LSB, HANDSHAKE as CRTP_HANDSHAKE,
+    PORT_COMMANDER_GENERIC as CRTP_PORT_COMMANDER_GENERIC,
+    PORT_LOCALIZATION as CRTP_PORT_LOCALIZATION, PORT_PARAM as CRTP_PORT_PARAM,
+    PORT_SIM as CRTP_PORT_SIM,
+};
 pub use dataset::{
     load as load_dataset, load_manifest as load_dataset_manifest, realization_file,
     save as save_dataset, segments as sample_segments, windows as dataset_windows, Dataset, Flight,

@@ -1,0 +1,310 @@
+//! CrazySim's UDP link to the SITL Crazyflie firmware, held in CI without a firmware checkout
+//! (`tools/firmware-sitl` flies the real firmware; CI has none): the packets against their
+//! published byte layouts, and a closed loop over real UDP sockets between host-train's plant and
+//! a stub firmware that speaks the firmware's side (handshake, parameter TOC and writes, IMU in,
+//! motor PWM out, external pose and full-state setpoints decoded as the firmware decodes them).
+
+use std::net::{SocketAddr, UdpSocket};
+use std::thread;
+use std::time::Duration;
+
+use host_train::io::{
+    crtp_header, ext_pose_packet, force_to_pwm, full_state_setpoint_packet, imu_packet,
+    motor_packet, param_toc_request, param_write_float, parse_ext_pose, parse_imu, parse_motor,
+    parse_param_answer, parse_setpoint, position_setpoint_packet, pwm_to_force_n, pwm_to_rpm,
+    quat_compress, stop_setpoint_packet, CrtpSetpoint, ParamAnswer, CRTP_HANDSHAKE,
+    CRTP_PORT_PARAM,
+};
+use host_train::{Plant, PlantState};
+use nalgebra::{UnitQuaternion, Vector3};
+
+#[test]
+fn packets_have_the_firmwares_byte_layouts() {
+    // IMU: header 0x9C (port 9, link bits, channel 0), type 0, then int16 little-endian:
+    // 1 g = 2048 LSB, 1000 deg/s = 16384 LSB.
+    assert_eq!(
+        imu_packet(
+            Vector3::new(0.0, -0.5, 1.0),
+            Vector3::new(1000.0, 0.0, -1.0)
+        ),
+        vec![0x9C, 0, 0, 0, 0x00, 0xFC, 0x00, 0x08, 0x00, 0x40, 0, 0, 0xF0, 0xFF]
+    );
+    // Saturation at the int16 range, never wrapping.
+    let sat = parse_imu(&imu_packet(
+        Vector3::new(100.0, -100.0, 0.0),
+        Vector3::zeros(),
+    ))
+    .unwrap();
+    assert!(sat.0.x > 15.9 && sat.0.y < -15.9);
+    // Motors: 4 × uint16 little-endian after the header.
+    assert_eq!(
+        motor_packet([1, 0x0203, 0xFFFF, 0]),
+        vec![0x9C, 1, 0, 3, 2, 0xFF, 0xFF, 0, 0]
+    );
+    // External pose: port 6 channel 1 (0x6D), type 8, 7 × f32.
+    let pose = ext_pose_packet(&Vector3::new(1.0, 2.0, 3.0), &UnitQuaternion::identity());
+    assert_eq!(&pose[..2], &[0x6D, 8]);
+    assert_eq!(&pose[2..6], &1.0f32.to_le_bytes());
+    assert_eq!(&pose[26..30], &1.0f32.to_le_bytes());
+    // Position setpoint: port 7 channel 0 (0x7C), type 7, x y z yaw(deg) as f32.
+    let pos = position_setpoint_packet(&Vector3::new(0.5, 0.0, 1.0), 90.0);
+    assert_eq!(pos.len(), 18);
+    assert_eq!(&pos[..2], &[0x7C, 7]);
+    assert_eq!(&pos[14..18], &90.0f32.to_le_bytes());
+    // Full state: type 6, 9 × int16 mm, mm/s, mm/s², the compressed quaternion, 3 × int16 mrad/s.
+    let fs = full_state_setpoint_packet(
+        &Vector3::new(0.5, -0.25, 1.0),
+        &Vector3::new(0.0, 0.1, 0.0),
+        &Vector3::new(0.0, 0.0, -9.81),
+        0.0,
+        0.5,
+    );
+    assert_eq!(fs.len(), 30);
+    assert_eq!(&fs[..2], &[0x7C, 6]);
+    assert_eq!(&fs[2..8], &[0xF4, 0x01, 0x06, 0xFF, 0xE8, 0x03]); // 500, -250, 1000 mm
+    assert_eq!(&fs[18..20], &(-9810i16).to_le_bytes());
+    // Identity: w (index 3) largest, the other three zero.
+    assert_eq!(&fs[20..24], &(3u32 << 30).to_le_bytes());
+    assert_eq!(&fs[28..30], &500i16.to_le_bytes());
+    // A yaw of 90 deg: w = z = 0.7071; the first largest (z, index 2) is sent, w as 511.
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    assert_eq!(quat_compress([0.0, 0.0, s, s]), (2 << 30) | 511);
+    assert_eq!(stop_setpoint_packet(), vec![0x7C, 0]);
+    // Parameters: port 2; TOC request on channel 0 (CMD_GET_ITEM_V2, id), write on channel 2.
+    assert_eq!(param_toc_request(0x0102), vec![0x2C, 2, 2, 1]);
+    let w = param_write_float(197, 0.25);
+    assert_eq!(&w[..3], &[0x2E, 197, 0]);
+    assert_eq!(&w[3..], &0.25f32.to_le_bytes());
+    // A TOC item as the firmware answers it: id, type, "group\0name\0".
+    let mut item = vec![crtp_header(CRTP_PORT_PARAM, 0), 2, 5, 0, 0x06];
+    item.extend_from_slice(b"quadSysId\0armLength\0");
+    assert_eq!(
+        parse_param_answer(&item),
+        Some(ParamAnswer::TocItem {
+            id: 5,
+            kind: 6,
+            name: "quadSysId.armLength".into()
+        })
+    );
+    assert_eq!(
+        parse_param_answer(&[0x2C, 2]),
+        Some(ParamAnswer::TocEnd),
+        "an answer past the TOC's end is the command byte alone"
+    );
+}
+
+/// The stub firmware's parameters.
+const PARAMS: [&str; 3] = [
+    "stabilizer.controller",
+    "quadSysId.armLength",
+    "quadSysId.thrustToTorque",
+];
+
+/// What the stub saw.
+#[derive(Default)]
+struct StubLog {
+    imu: Vec<(Vector3<f64>, Vector3<f64>)>,
+    poses: usize,
+    setpoints: Vec<CrtpSetpoint>,
+    params: Vec<(u16, f32)>,
+}
+
+/// The firmware's side: the handshake as `socketlink.c` does it (send the handshake byte until
+/// it comes back), then per IMU sample one motor packet. Its controller is a plain altitude loop
+/// on the external pose and the full-state setpoint (equal rotor forces, through the power
+/// distribution's force → PWM map): not the point, only enough to close the loop.
+fn stub_firmware(plant_addr: SocketAddr, mass_kg: f64, g: f64) -> StubLog {
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    let mut buf = [0u8; 64];
+    loop {
+        sock.send_to(&[CRTP_HANDSHAKE], plant_addr).unwrap();
+        if let Ok((1, _)) = sock.recv_from(&mut buf) {
+            if buf[0] == CRTP_HANDSHAKE {
+                break;
+            }
+        }
+    }
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut log = StubLog::default();
+    let (mut z, mut z_prev, mut vz) = (0.0, f64::NAN, 0.0);
+    let mut z_ref = (0.0, 0.0);
+    while let Ok((n, _)) = sock.recv_from(&mut buf) {
+        let d = &buf[..n];
+        if d == [0xFF] {
+            break; // the test's end
+        }
+        if let Some(imu) = parse_imu(d) {
+            log.imu.push(imu);
+            let f = mass_kg * (g + 30.0 * (z_ref.0 - z) + 10.0 * (z_ref.1 - vz));
+            let pwm = force_to_pwm(f / 4.0);
+            sock.send_to(&motor_packet([pwm; 4]), plant_addr).unwrap();
+        } else if let Some((p, _q)) = parse_ext_pose(d) {
+            log.poses += 1;
+            if z_prev.is_finite() {
+                vz = (p.z - z_prev) / 0.01;
+            }
+            z_prev = p.z;
+            z = p.z;
+        } else if let Some(sp) = parse_setpoint(d) {
+            if let CrtpSetpoint::FullState { p_m, v_m_s, .. } = &sp {
+                z_ref = (p_m.z, v_m_s.z);
+            }
+            log.setpoints.push(sp);
+        } else if n == 7 && d[0] == crtp_header(CRTP_PORT_PARAM, 2) {
+            // a write by id: applied, and echoed once done
+            let id = u16::from_le_bytes([d[1], d[2]]);
+            log.params
+                .push((id, f32::from_le_bytes([d[3], d[4], d[5], d[6]])));
+            sock.send_to(d, plant_addr).unwrap();
+        } else if n == 4 && d[0] == crtp_header(CRTP_PORT_PARAM, 0) && d[1] == 2 {
+            // a TOC request: the item, or past the end the command byte alone
+            let id = u16::from_le_bytes([d[2], d[3]]) as usize;
+            let mut answer = vec![crtp_header(CRTP_PORT_PARAM, 0), 2];
+            if let Some(name) = PARAMS.get(id) {
+                let (group, name) = name.split_once('.').unwrap();
+                answer.extend_from_slice(&(id as u16).to_le_bytes());
+                answer.push(6);
+                answer.extend_from_slice(group.as_bytes());
+                answer.push(0);
+                answer.extend_from_slice(name.as_bytes());
+                answer.push(0);
+            }
+            sock.send_to(&answer, plant_addr).unwrap();
+        }
+    }
+    log
+}
+
+#[test]
+fn the_plant_flies_a_stub_firmware_over_udp() {
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let addr = sock.local_addr().unwrap();
+    let mut plant = Plant::nominal(PlantState::at_rest(Vector3::new(0.0, 0.0, 1.0), 0.0));
+    let (m, g, kf) = (
+        plant.params.mass_kg,
+        plant.params.gravity_m_s2,
+        plant.params.kf_n_per_rpm2,
+    );
+    let stub = thread::spawn(move || stub_firmware(addr, m, g));
+
+    // Handshake: the first datagram is the handshake byte; echo it.
+    let mut buf = [0u8; 64];
+    let fw = loop {
+        let (n, from) = sock
+            .recv_from(&mut buf)
+            .expect("no handshake from the stub");
+        if buf[..n] == [CRTP_HANDSHAKE] {
+            sock.send_to(&[CRTP_HANDSHAKE], from).unwrap();
+            break from;
+        }
+    };
+    // Drain the stub's extra handshakes, then read the parameter TOC until its end.
+    sock.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let mut toc = Vec::new();
+    for id in 0.. {
+        sock.send_to(&param_toc_request(id), fw).unwrap();
+        let answer = loop {
+            let (n, _) = sock.recv_from(&mut buf).expect("no TOC answer");
+            if let Some(a) = parse_param_answer(&buf[..n]) {
+                break a;
+            }
+        };
+        match answer {
+            ParamAnswer::TocItem { id: got, name, .. } => {
+                assert_eq!(got, id);
+                toc.push(name);
+            }
+            ParamAnswer::TocEnd => break,
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    assert_eq!(toc, PARAMS);
+    let arm_id = toc.iter().position(|n| n == "quadSysId.armLength").unwrap() as u16;
+    sock.send_to(&param_write_float(arm_id, 0.0396), fw)
+        .unwrap();
+    let echoed = loop {
+        let (n, _) = sock.recv_from(&mut buf).expect("the write was not echoed");
+        if let Some(ParamAnswer::Written { id, value }) = parse_param_answer(&buf[..n]) {
+            break (id, f32::from_le_bytes(value));
+        }
+    };
+    assert_eq!(echoed, (arm_id, 0.0396));
+
+    // 3 s in lock-step: per millisecond one IMU sample out and one motor packet back; the pose
+    // at 100 Hz, a full-state setpoint at 100 Hz: hold 1.0 m, then from 1 s climb to 1.2 m.
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut sent_imu = Vec::new();
+    let mut sent_sp = Vec::new();
+    let mut pwm_seen = Vec::new();
+    for k in 0..3000u32 {
+        let t = k as f64 * 1e-3;
+        let s = *plant.state();
+        if k % 10 == 0 {
+            let q = UnitQuaternion::from_matrix(&s.rot);
+            sock.send_to(&ext_pose_packet(&s.p_m, &q), fw).unwrap();
+            let u = ((t - 1.0) / 1.0).clamp(0.0, 1.0);
+            let z_ref = 1.0 + 0.2 * u;
+            let vz_ref = if (0.0..1.0).contains(&(t - 1.0)) {
+                0.2
+            } else {
+                0.0
+            };
+            let sp = (
+                Vector3::new(0.0, 0.0, z_ref),
+                Vector3::new(0.0, 0.0, vz_ref),
+            );
+            sock.send_to(
+                &full_state_setpoint_packet(&sp.0, &sp.1, &Vector3::zeros(), 0.0, 0.0),
+                fw,
+            )
+            .unwrap();
+            sent_sp.push(sp);
+        }
+        let acc_g = plant.accelerometer() / g;
+        let gyro = s.w_body_rad_s.map(f64::to_degrees);
+        sock.send_to(&imu_packet(acc_g, gyro), fw).unwrap();
+        sent_imu.push(acc_g);
+        let pwm = loop {
+            let (n, _) = sock.recv_from(&mut buf).expect("no motor packet");
+            if let Some(p) = parse_motor(&buf[..n]) {
+                break p;
+            }
+        };
+        pwm_seen.push(pwm);
+        plant.step(pwm.map(|p| pwm_to_rpm(p, kf)), 1e-3);
+    }
+    sock.send_to(&[0xFF], fw).unwrap();
+    let log = stub.join().unwrap();
+
+    // Everything sent arrived and decoded to what was sent (to the layouts' resolution).
+    assert_eq!(log.imu.len(), 3000);
+    assert_eq!(log.poses, 300);
+    assert_eq!(log.params, vec![(arm_id, 0.0396)]);
+    for (got, sent) in log.imu.iter().zip(&sent_imu) {
+        assert!((got.0 - sent).amax() <= 0.5 * 32.0 / 65536.0 + 1e-12);
+    }
+    assert_eq!(log.setpoints.len(), sent_sp.len());
+    for (got, sent) in log.setpoints.iter().zip(&sent_sp) {
+        let CrtpSetpoint::FullState {
+            p_m, v_m_s, q_xyzw, ..
+        } = got
+        else {
+            panic!("not a full-state setpoint: {got:?}");
+        };
+        assert!((p_m - sent.0).amax() <= 0.0005 && (v_m_s - sent.1).amax() <= 0.0005);
+        assert!((q_xyzw[3] - 1.0).abs() < 1e-9, "yaw 0 is the identity");
+    }
+    // The loop closed through the bytes: the plant climbed to the setpoint and holds it.
+    let z = plant.state().p_m.z;
+    assert!((z - 1.2).abs() < 0.01, "z = {z} m, not the 1.2 m setpoint");
+    // Hover PWM: each rotor's force is a quarter of the weight.
+    let hover = pwm_to_force_n(pwm_seen[999][0]) * 4.0;
+    assert!(
+        (hover - m * g).abs() < 0.01 * m * g,
+        "hover force {hover} N"
+    );
+}
