@@ -14,8 +14,8 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use host_train::io::{
     ext_pose_packet, full_state_setpoint_packet, imu_packet, param_toc_request, param_write_float,
-    parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, CRTP_HANDSHAKE,
-    CRTP_PORT_SIM,
+    param_write_u8, parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet,
+    CRTP_HANDSHAKE, CRTP_PORT_SIM,
 };
 use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
@@ -259,6 +259,13 @@ pub fn run() -> Result<()> {
     let mut mixer_done_at: Option<f64> = None;
     let mut engage_at: Option<f64> = None;
     let mut hold_started_at: Option<f64> = None;
+    let mut reset_id: Option<u16> = None;
+    let mut reset_sent_at: Option<f64> = None;
+    let mut reset_echoed_at: Option<f64> = None;
+    // After an estimator reset: the largest distance from the setpoint, and when it last was
+    // above 1 cm.
+    let mut reset_peak_m = 0.0f64;
+    let mut reset_last_over_1cm: Option<f64> = None;
     let mut link_lost_at: Option<f64> = None;
     let mut motors_off_at: Option<f64> = None;
     let setpoint_every = ((1000.0 / args.setpoint_hz).round() as u64).max(1);
@@ -289,11 +296,19 @@ pub fn run() -> Result<()> {
                         *id = sh.param_toc.iter().find(|(_, n)| *n == full).map(|x| x.0);
                     }
                 }
+                if reset_id.is_none() {
+                    reset_id = sh
+                        .param_toc
+                        .iter()
+                        .find(|(_, n)| n == "kalman.resetEstimation")
+                        .map(|x| x.0);
+                }
                 let toc_end = sh.param_toc_end;
                 let have_next = sh.param_toc.iter().any(|x| x.0 == toc_next);
                 let written: Vec<u16> = sh.param_written.iter().map(|w| w.0).collect();
                 drop(sh);
-                if mixer_ids.iter().all(Option::is_some) {
+                let need_reset = args.estimator_reset_s.is_some() && reset_id.is_none();
+                if mixer_ids.iter().all(Option::is_some) && !need_reset {
                     let pending: Vec<(u16, f32)> = mixer_ids
                         .iter()
                         .zip(&mixer_params)
@@ -312,6 +327,8 @@ pub fn run() -> Result<()> {
                             let _ = sock.send_to(&param_write_float(id, v), fw_addr);
                         }
                     }
+                } else if toc_end && need_reset {
+                    bail!("the firmware has no parameter kalman.resetEstimation");
                 } else if toc_end {
                     bail!("the firmware has no parameter quadSysId.armLength / thrustToTorque");
                 } else {
@@ -371,6 +388,23 @@ pub fn run() -> Result<()> {
             (Some(l), Some(h0)) => t < h0 + l,
             _ => true,
         };
+        // The estimator reset: `kalman.resetEstimation = 1`, written until the firmware echoes it.
+        if let (Some(r), Some(h0), Some(id)) = (args.estimator_reset_s, hold_started_at, reset_id) {
+            if t >= h0 + r && reset_echoed_at.is_none() {
+                if shared
+                    .lock()
+                    .unwrap()
+                    .param_written
+                    .iter()
+                    .any(|w| w.0 == id)
+                {
+                    reset_echoed_at = Some(t);
+                } else if k.is_multiple_of(20) {
+                    let _ = sock.send_to(&param_write_u8(id, 1), fw_addr);
+                    reset_sent_at.get_or_insert(t);
+                }
+            }
+        }
         if !link_up && link_lost_at.is_none() {
             link_lost_at = Some(t);
         }
@@ -421,6 +455,13 @@ pub fn run() -> Result<()> {
                 touchdown_speed = None;
             }
             on_ground = false;
+        }
+        if let (Some(_), Some(sp), "hold") = (reset_sent_at, &setpoint, phase) {
+            let e = (s.p_m - sp.p_m).norm();
+            reset_peak_m = reset_peak_m.max(e);
+            if e > 0.01 {
+                reset_last_over_1cm = Some(t);
+            }
         }
         if link_lost_at.is_some() && motors_off_at.is_none() {
             let p0 = *lost_p.get_or_insert(s.p_m);
@@ -607,6 +648,19 @@ pub fn run() -> Result<()> {
             .map(|v| format!("{v:.2} m/s"))
             .unwrap_or_else(|| "-".into())
     );
+    if let Some(tr) = reset_sent_at {
+        println!(
+            "estimator reset written at plant t = {tr:.3} s ({} s into the hold), echoed {}; then, to the hold's end: peak error {:.2} cm, back within 1 cm {}",
+            args.estimator_reset_s.unwrap_or(0.0),
+            reset_echoed_at
+                .map(|e| format!("{:.0} ms later", (e - tr) * 1e3))
+                .unwrap_or_else(|| "NEVER".into()),
+            reset_peak_m * 100.0,
+            reset_last_over_1cm
+                .map(|e| format!("{:.2} s after", e - tr))
+                .unwrap_or_else(|| "throughout".into())
+        );
+    }
     if let Some(tl) = link_lost_at {
         let off = motors_off_at.map(|t| format!("{:.3} s after", t - tl));
         println!(

@@ -104,6 +104,11 @@ struct Args {
     /// the motors never stop.
     #[arg(long)]
     link_loss_s: Option<f64>,
+    /// Reset the firmware's Kalman estimator this many seconds into the hold
+    /// (`kalman.resetEstimation = 1` over CRTP, as cflib's `reset_estimator` does); the peak
+    /// error after it and the time back within 1 cm are reported.
+    #[arg(long)]
+    estimator_reset_s: Option<f64>,
     /// Directory for flight.csv, flight.svg, console.log.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,

@@ -273,6 +273,14 @@ pub fn quat_decompress(comp: u32) -> [f64; 4] {
     q
 }
 
+/// A 1-byte parameter write by id (a uint8 or int8 parameter, e.g. `kalman.resetEstimation`).
+pub fn param_write_u8(id: u16, value: u8) -> Vec<u8> {
+    let mut pk = vec![header(PORT_PARAM, PARAM_WRITE_CH)];
+    pk.extend_from_slice(&id.to_le_bytes());
+    pk.push(value);
+    pk
+}
+
 /// A parameter TOC request: the item with id `id` (port 2, channel 0, CMD_GET_ITEM_V2).
 pub fn param_toc_request(id: u16) -> Vec<u8> {
     let mut pk = vec![header(PORT_PARAM, PARAM_TOC_CH), PARAM_CMD_GET_ITEM_V2];
@@ -304,11 +312,13 @@ pub enum ParamAnswer {
     },
     /// The TOC request was past its end.
     TocEnd,
-    /// A write, echoed once done.
+    /// A write, echoed once done (the firmware echoes the packet it applied). A 1-byte value
+    /// echo has the length of the firmware's "no such id" answer (id, errno), so a caller that
+    /// writes a u8 checks the id against the TOC first.
     Written {
         /// The parameter's id.
         id: u16,
-        /// The value's bytes, little-endian.
+        /// The value's bytes, little-endian, zero-padded to 4.
         value: [u8; 4],
     },
 }
@@ -336,10 +346,14 @@ pub fn parse_param_answer(d: &[u8]) -> Option<ParamAnswer> {
                 name: format!("{group}.{name}"),
             })
         }
-        PARAM_WRITE_CH if d.len() == 7 => Some(ParamAnswer::Written {
-            id: u16::from_le_bytes([d[1], d[2]]),
-            value: [d[3], d[4], d[5], d[6]],
-        }),
+        PARAM_WRITE_CH if (4..=7).contains(&d.len()) => {
+            let mut value = [0; 4];
+            value[..d.len() - 3].copy_from_slice(&d[3..]);
+            Some(ParamAnswer::Written {
+                id: u16::from_le_bytes([d[1], d[2]]),
+                value,
+            })
+        }
         _ => None,
     }
 }

@@ -22,8 +22,8 @@ pub mod usdlog;
 // The layer's front door: what code outside host-train/src uses, by these names.
 pub use crtp::{
     ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header, imu_packet,
-    motor_packet, param_toc_request, param_write_float, parse_ext_pose, parse_imu, parse_motor,
-    parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
+    motor_packet, param_toc_request, param_write_float, param_write_u8, parse_ext_pose, parse_imu,
+    parse_motor, parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
     position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress, quat_decompress,
     stop_setpoint_packet, ParamAnswer, Setpoint as CrtpSetpoint, DEG_PER_LSB as IMU_DEG_PER_LSB,
     G_PER_LSB as IMU_G_PER_LSB, HANDSHAKE as CRTP_HANDSHAKE,
