@@ -692,8 +692,41 @@ pub fn run() -> Result<()> {
     );
     write_csv(&args.out.join("flight.csv"), &samples)?;
     plot(&args.out.join("flight.svg"), &samples, &scenario.name)?;
+    let cm = |x: f64| (x * 1e4).round() / 100.0;
+    let settled = stats(&|s| s.phase == "hold" && s.t_s >= hold_t0 + args.window_s);
+    let summary = serde_json::json!({
+        "scenario": scenario.name,
+        "setpoint": format!("{:?}", args.setpoint),
+        "setpoint_hz": args.setpoint_hz,
+        "window_s": args.window_s,
+        "hold_rmse_cm": settled.map(|x| cm(x.0)),
+        "hold_max_cm": settled.map(|x| cm(x.1)),
+        "takeoff_rmse_cm": stats(&|s| s.phase == "takeoff").map(|x| cm(x.0)),
+        "landing_rmse_cm": stats(&|s| s.phase == "land").map(|x| cm(x.0)),
+        "touchdown_m_s": touchdown_speed,
+        "crashed": crash.as_ref().map(|(t, why)| format!("at {t:.2} s: {why}")),
+        "airborne": airborne_once,
+        "link_loss": link_lost_at.map(|tl| serde_json::json!({
+            "at_hold_s": args.link_loss_s,
+            "motors_off_after_s": motors_off_at.map(|t| t - tl),
+            "drift_cm": cm(drift_m),
+            "ground_speed_m_s": fall.map(|f| f.0),
+            "ground_tilt_deg": fall.map(|f| f.1),
+        })),
+        "estimator_reset": reset_sent_at.map(|tr| serde_json::json!({
+            "at_hold_s": args.estimator_reset_s,
+            "echoed_after_s": reset_echoed_at.map(|e| e - tr),
+            "peak_cm": cm(reset_peak_m),
+            "back_within_1cm_after_s": reset_last_over_1cm.map(|e| e - tr),
+        })),
+        "plant_s_per_wall_s": plant.t_s() / wall,
+        "max_late_ms": max_late_ms,
+        "pacing_resets": late_resets,
+        "motor_packets_per_s_in_flight": engage_motor_rate,
+    });
+    host_train::io::write_json_atomic(&args.out.join("summary.json"), &summary)?;
     println!(
-        "wrote {}/flight.csv, flight.svg, console.log",
+        "wrote {}/flight.csv, flight.svg, console.log, summary.json",
         args.out.display()
     );
     if crash.is_some() || !airborne_once {

@@ -44,7 +44,7 @@
 //!
 //! Output: the flight's numbers on stdout, and in `--out` (default target/firmware-sitl/flight):
 //! flight.csv (every 10 ms), flight.svg (z and the setpoint, the position error) and console.log
-//! (the firmware's stdout).
+//! (the firmware's stdout), summary.json (the numbers, for tools/firmware-sitl/study.sh).
 
 use std::path::PathBuf;
 
@@ -109,7 +109,7 @@ struct Args {
     /// error after it and the time back within 1 cm are reported.
     #[arg(long)]
     estimator_reset_s: Option<f64>,
-    /// Directory for flight.csv, flight.svg, console.log.
+    /// Directory for flight.csv, flight.svg, console.log, summary.json.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,
 }
