@@ -20,6 +20,10 @@ pub struct FromFirmware {
     pub param_toc_end: bool,
     /// Parameter writes the firmware echoed (it echoes a write once done): (id, value bytes).
     pub param_written: Vec<(u16, [u8; 4])>,
+    /// cflib's packets for the firmware, waiting for the loop to send them.
+    pub from_cflib: std::collections::VecDeque<Vec<u8>>,
+    /// The longest that wait has been (packets).
+    pub from_cflib_max: usize,
 }
 
 /// The firmware's console, line by line, into a file and a flag for the stabilizer loop.

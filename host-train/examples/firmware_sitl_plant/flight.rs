@@ -147,8 +147,9 @@ pub fn run() -> Result<()> {
     }
     if let Some(lib) = &lib_sock {
         let lib = lib.try_clone()?;
-        let fw = sock.try_clone()?;
         let (shared, lib_addr, stop) = (shared.clone(), lib_addr.clone(), stop.clone());
+        // cflib's packets wait here for the loop, which sends them one per millisecond between
+        // the sensor stream's packets (see the loop).
         thread::spawn(move || {
             let mut buf = [0u8; 128];
             while !stop.load(Ordering::Relaxed) {
@@ -156,9 +157,9 @@ pub fn run() -> Result<()> {
                     continue;
                 };
                 *lib_addr.lock().unwrap() = Some(addr);
-                if let Some(fa) = shared.lock().unwrap().fw_addr {
-                    let _ = fw.send_to(&buf[..n], fa);
-                }
+                let mut sh = shared.lock().unwrap();
+                sh.from_cflib.push_back(buf[..n].to_vec());
+                sh.from_cflib_max = sh.from_cflib_max.max(sh.from_cflib.len());
             }
         });
     }
@@ -259,6 +260,7 @@ pub fn run() -> Result<()> {
     let mut mixer_done_at: Option<f64> = None;
     let mut engage_at: Option<f64> = None;
     let mut hold_started_at: Option<f64> = None;
+    let mut cflib_sent = 0u64;
     let mut reset_id: Option<u16> = None;
     let mut reset_sent_at: Option<f64> = None;
     let mut reset_echoed_at: Option<f64> = None;
@@ -488,11 +490,24 @@ pub fn run() -> Result<()> {
         };
         let imu = imu_packet(acc / g, s.w_body_rad_s.map(f64::to_degrees));
         let _ = sock.send_to(&imu, fw_addr);
-        if k.is_multiple_of(10) && link_up {
+        let pose_now = k.is_multiple_of(10) && link_up;
+        let setpoint_now = k % setpoint_every == 5 % setpoint_every && link_up;
+        // cflib's packets: one per millisecond, and none in a millisecond that already carries a
+        // pose or a setpoint. The firmware's socket link queues 5 packets and drops the rest, its
+        // reader runs about once per tick, and cflib's UDP driver never resends: one packet lost
+        // stalls a parameter download or a memory write for good.
+        if !pose_now && !setpoint_now && link_up {
+            let next = shared.lock().unwrap().from_cflib.pop_front();
+            if let Some(pk) = next {
+                let _ = sock.send_to(&pk, fw_addr);
+                cflib_sent += 1;
+            }
+        }
+        if pose_now {
             let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(s.rot));
             let _ = sock.send_to(&ext_pose_packet(&s.p_m, &q), fw_addr);
         }
-        if k % setpoint_every == 5 % setpoint_every && link_up {
+        if setpoint_now {
             match &setpoint {
                 Some(sp) => {
                     let pk = match args.setpoint {
@@ -557,9 +572,14 @@ pub fn run() -> Result<()> {
         }
     }
     let wall = loop_start.elapsed().as_secs_f64();
-    let (motor_packets, last_pwm, param_written) = {
+    let (motor_packets, last_pwm, param_written, from_cflib_max) = {
         let sh = shared.lock().unwrap();
-        (sh.motor_packets, sh.pwm, sh.param_written.clone())
+        (
+            sh.motor_packets,
+            sh.pwm,
+            sh.param_written.clone(),
+            sh.from_cflib_max,
+        )
     };
     stop.store(true, Ordering::Relaxed);
     let hamflight_lines = console.grep("HAMFLIGHT");
@@ -683,12 +703,14 @@ pub fn run() -> Result<()> {
         "timing: {:.3} s of plant in {wall:.3} s of wall clock ({:.4} plant s per wall s); IMU \
          packets {k} ({:.1} /s); motor packets {motor_packets} ({:.1} /s overall, {engage_motor_rate:.1} /s \
          in flight); max lateness {max_late_ms:.2} ms, {late_resets} pacing resets; CRTP relayed \
-         to cflib {}",
+         to cflib {}, from cflib {} (at most {} waiting)",
         plant.t_s(),
         plant.t_s() / wall,
         k as f64 / wall,
         motor_packets as f64 / wall,
-        relayed.load(Ordering::Relaxed)
+        relayed.load(Ordering::Relaxed),
+        cflib_sent,
+        from_cflib_max
     );
     write_csv(&args.out.join("flight.csv"), &samples)?;
     plot(&args.out.join("flight.svg"), &samples, &scenario.name)?;
