@@ -271,7 +271,8 @@ pub fn run() -> Result<()> {
     let mut link_lost_at: Option<f64> = None;
     let mut motors_off_at: Option<f64> = None;
     let setpoint_every = ((1000.0 / args.setpoint_hz).round() as u64).max(1);
-    let total_guard_s = 60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s;
+    let total_guard_s =
+        60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s + args.linger_s;
     loop {
         let t = plant.t_s();
         let (pwm, motor_packets) = {
@@ -371,9 +372,9 @@ pub fn run() -> Result<()> {
                 } else if te < land_end {
                     let sp = smooth_move(top, bottom, args.land_s, te - hold_end, yaw0);
                     ("land", Some(sp))
-                } else if te < land_end + 1.0 {
+                } else if te < land_end + 1.0 + args.linger_s {
                     ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
-                } else if te < land_end + 2.0 {
+                } else if te < land_end + 2.0 + args.linger_s {
                     ("stop", None)
                 } else {
                     break;

@@ -104,6 +104,11 @@ struct Args {
     /// the motors never stop.
     #[arg(long)]
     link_loss_s: Option<f64>,
+    /// Seconds to stay on the ground after the landing, with the firmware running, before the stop
+    /// setpoint (for a cflib client that waits for something the landing allows, e.g. a deferred
+    /// weight swap).
+    #[arg(long, default_value_t = 0.0)]
+    linger_s: f64,
     /// Reset the firmware's Kalman estimator this many seconds into the hold
     /// (`kalman.resetEstimation = 1` over CRTP, as cflib's `reset_estimator` does); the peak
     /// error after it and the time back within 1 cm are reported.
