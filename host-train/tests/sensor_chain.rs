@@ -8,8 +8,11 @@
 //! Run in release: `cargo test --release -p host-train --test sensor_chain`.
 
 use hamflight::Gains;
-use host_train::control::{load_learned, CoreController, DEFAULT_WEIGHTS};
-use host_train::fly::{fly_scenario, margins_of, measure_point, LoopPoint, Report};
+use host_train::control::{by_name, load_learned, CoreController, DEFAULT_WEIGHTS};
+use host_train::fly::{
+    fly_scenario, fly_with_states, margins_of, measure_point, FlightLog, LoopPoint, Report,
+    StateLog,
+};
 
 mod flight_common;
 use flight_common::{fly, repo, scenario};
@@ -92,6 +95,69 @@ fn the_estimator_is_biased_by_a_steady_force_and_the_vehicle_sits_at_that_bias()
             "{name}: steady error {err:.4} m against the estimator's bias {bias:.4} m"
         );
     }
+}
+
+/// `fly_with_states` on `sc` with `name`, checked against `fly_scenario`'s log (the same flight,
+/// bit for bit) and for one row per tick in every state.
+fn fly_states(name: &str, sc: &host_train::sim::Scenario) -> (FlightLog, StateLog) {
+    let weights = repo(DEFAULT_WEIGHTS);
+    let mut ctrl = by_name(name, sc, Some(&weights)).expect("controller exists");
+    let (log, st) = fly_with_states(sc, ctrl.as_mut());
+    let plain = fly_scenario(sc, ctrl.as_mut());
+    assert_eq!(
+        (&log.p_m, &log.rpm, &log.est_p_m),
+        (&plain.p_m, &plain.rpm, &plain.est_p_m)
+    );
+    let n = log.t_s.len();
+    for (what, v) in [
+        ("v_world_m_s", &st.v_world_m_s),
+        ("w_body_rad_s", &st.w_body_rad_s),
+        ("est_p_m", &st.est_p_m),
+        ("est_v_world_m_s", &st.est_v_world_m_s),
+        ("est_rpy_rad", &st.est_rpy_rad),
+        ("est_w_body_rad_s", &st.est_w_body_rad_s),
+    ] {
+        assert_eq!(v.len(), n, "{name} on {}: {what}", sc.name);
+    }
+    (log, st)
+}
+
+fn max_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| (0..3).map(move |k| (x[k] - y[k]).abs()))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_state_log_records_the_estimate_flown_on_and_the_truth() {
+    // With the chain: the estimator's output, off the truth by the filter's error.
+    let (log, st) = fly_states("adaptive", &scenario("cf-hover-lag50"));
+    assert_eq!(st.est_p_m[..log.est_p_m.len()], log.est_p_m[..]);
+    let off = max_diff(&st.est_p_m, &log.p_m);
+    // measured 0.067 cm (the largest on any axis)
+    assert!(
+        off > 1e-5 && off < 0.001,
+        "estimate off the truth by {off} m"
+    );
+    // Without: the truth itself (no noise in hover.toml), and a crash's last tick is recorded.
+    let sc = scenario("hover");
+    let (log, st) = fly_states("adaptive", &sc);
+    assert_eq!((&st.est_p_m, &st.est_rpy_rad), (&log.p_m, &log.rpy_rad));
+    assert_eq!(
+        (&st.est_v_world_m_s, &st.est_w_body_rad_s),
+        (&st.v_world_m_s, &st.w_body_rad_s)
+    );
+    let (log, _) = fly_states("pid", &scenario("paper-spiral"));
+    assert!(
+        log.crash_time_s.is_some(),
+        "the DSL PID crashes on paper-spiral"
+    );
+    // The scenario's state noise (σ 1 mm): the measurement flown on; its draws at the last tick
+    // leave the flight as it was.
+    let (log, st) = fly_states("adaptive", &scenario("calm-spiral-noisy"));
+    let off = max_diff(&st.est_p_m, &log.p_m);
+    assert!(off > 1e-4 && off < 0.01, "measured {off} m off the truth");
 }
 
 /// The cause, reintroduced: driven by the biased velocity as given, the paper's law settles

@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 use crate::control::controller::Controller;
 pub use crate::io::files::{write_atomic, write_json_atomic};
 pub use crate::io::flightlog::FlightLog;
-use crate::sim::plant::Plant;
+use crate::sim::plant::{Plant, PlantState};
 use crate::sim::scenario::Scenario;
 
 /// Position error (m) above which a flight counts as crashed.
@@ -59,6 +59,50 @@ pub fn fly_with_progress(
     fly_observed(scenario, ctrl, progress, |_, _, _| {})
 }
 
+/// The states of one flight beside its [`FlightLog`], one row per tick (as long as its `t_s`):
+/// the true velocity and body rates (the true attitude is the log's `rpy_rad`), and the state
+/// the controller was given. With a sensor chain (the scenario's `[sensors]`) that is the
+/// estimator's p, v and R and the filtered gyro's ω, delayed as configured; without one, the
+/// true state plus the scenario's `effects.noise` (the truth itself when that is off). At the
+/// last tick (a crash's or the end's, which no control step follows) it is what the controller
+/// would have been given.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct StateLog {
+    /// True velocity (m/s, world).
+    pub v_world_m_s: Vec<[f64; 3]>,
+    /// True angular velocity ω (rad/s, body).
+    pub w_body_rad_s: Vec<[f64; 3]>,
+    /// The position the controller was given (m, world).
+    pub est_p_m: Vec<[f64; 3]>,
+    /// The velocity the controller was given (m/s, world).
+    pub est_v_world_m_s: Vec<[f64; 3]>,
+    /// The attitude the controller was given: roll, pitch, yaw (rad, Z-Y-X, as `rpy_rad`).
+    pub est_rpy_rad: Vec<[f64; 3]>,
+    /// The body rates the controller was given (rad/s, body).
+    pub est_w_body_rad_s: Vec<[f64; 3]>,
+}
+
+impl StateLog {
+    fn push_truth(&mut self, s: &PlantState) {
+        self.v_world_m_s.push(s.v_world_m_s().into());
+        self.w_body_rad_s.push(s.w_body_rad_s.into());
+    }
+
+    fn push_estimate(&mut self, s: &PlantState) {
+        self.est_p_m.push(s.p_m.into());
+        self.est_v_world_m_s.push(s.v_world_m_s().into());
+        self.est_rpy_rad.push(s.rpy().into());
+        self.est_w_body_rad_s.push(s.w_body_rad_s.into());
+    }
+}
+
+/// [`fly`], also recording the flight's states ([`StateLog`]); the [`FlightLog`] is the same.
+pub fn fly_with_states(scenario: &Scenario, ctrl: &mut dyn Controller) -> (FlightLog, StateLog) {
+    let mut states = StateLog::default();
+    let log = fly_loop(scenario, ctrl, None, |_, _, _| {}, Some(&mut states));
+    (log, states)
+}
+
 /// The one SITL flight loop ([`fly`], [`fly_with_progress`], and `track`'s
 /// [`super::track::track_disturbance`]): resets `ctrl`, then at every control tick measures (the
 /// scenario's sensor chain, else its state and accelerometer noise on their own streams), steps
@@ -68,7 +112,18 @@ pub fn fly_observed<C: Controller + ?Sized>(
     scenario: &Scenario,
     ctrl: &mut C,
     progress: Option<&indicatif::ProgressBar>,
+    on_tick: impl FnMut(f64, &C, &Plant),
+) -> FlightLog {
+    fly_loop(scenario, ctrl, progress, on_tick, None)
+}
+
+/// [`fly_observed`], recording into `states` when given (which changes nothing else).
+fn fly_loop<C: Controller + ?Sized>(
+    scenario: &Scenario,
+    ctrl: &mut C,
+    progress: Option<&indicatif::ProgressBar>,
     mut on_tick: impl FnMut(f64, &C, &Plant),
+    mut states: Option<&mut StateLog>,
 ) -> FlightLog {
     let wall0 = Instant::now();
     ctrl.reset();
@@ -115,14 +170,24 @@ pub fn fly_observed<C: Controller + ?Sized>(
         log.adaptation
             .push(ctrl.adaptation_estimate().unwrap_or_default());
         log.rpy_rad.push(truth.rpy().into());
-        let err_ok = err.is_finite() && err <= CRASH_ERR_M;
-        if !truth.is_finite() || !err_ok || truth.p_m.z < 0.0 {
-            log.rpm.push(last_cmd);
-            log.crash_time_s = Some(t);
-            break;
+        if let Some(s) = states.as_deref_mut() {
+            s.push_truth(&truth);
         }
-        if k == n_ticks {
+        let err_ok = err.is_finite() && err <= CRASH_ERR_M;
+        let crashed = !truth.is_finite() || !err_ok || truth.p_m.z < 0.0;
+        if crashed || k == n_ticks {
+            if let Some(s) = states.as_deref_mut() {
+                // What the controller would be given; the noise streams are not used again.
+                let est = match chain.as_ref().and_then(|c| c.view()) {
+                    Some(view) => view.state,
+                    None => plant.measure(&mut rng),
+                };
+                s.push_estimate(&est);
+            }
             log.rpm.push(last_cmd);
+            if crashed {
+                log.crash_time_s = Some(t);
+            }
             break;
         }
         let (meas, acc) = match chain.as_ref().and_then(|c| c.view()) {
@@ -135,6 +200,9 @@ pub fn fly_observed<C: Controller + ?Sized>(
                 plant.measure_accelerometer(&mut rng_acc),
             ),
         };
+        if let Some(s) = states.as_deref_mut() {
+            s.push_estimate(&meas);
+        }
         let c0 = Instant::now();
         let cmd = ctrl.step_measured(t, &meas, Some(&acc), &r, dt);
         log.control_wall_s += c0.elapsed().as_secs_f64();
