@@ -14,8 +14,8 @@ Everything here runs the same compiled f32 Rust code as the firmware and ``host-
 
 Units are SI and named: positions m (world), R body->world (row-major numpy 3x3), velocities in
 the body frame (m/s, rad/s), accelerometer specific force m/s^2 (body, +9.8 along z at hover),
-dt s. Inputs may be float64 or float32 arrays (or sequences of numbers); they are cast to f32 as
-the bridge casts them.
+dt s. Inputs may be float64, float32 or integer arrays (or sequences of numbers); they are cast
+to f32 as the bridge casts them.
 """
 
 from __future__ import annotations

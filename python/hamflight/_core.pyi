@@ -15,7 +15,7 @@ GAIN_KEYWORDS: List[str]
 BLOB_HEADER_LEN: int
 BLOB_CRC_LEN: int
 
-ArrayLike = Union[npt.NDArray[np.float64], npt.NDArray[np.float32], Sequence[float], Sequence[Sequence[float]]]
+ArrayLike = Union[npt.NDArray[np.float64], npt.NDArray[np.float32], npt.NDArray[np.integer], Sequence[float], Sequence[Sequence[float]]]
 Weights = Union[str, PathLike, bytes, bytearray, "Blob", None]
 F32 = npt.NDArray[np.float32]
 
@@ -194,7 +194,8 @@ class Controller:
     k_p_n_per_m, k_v_n_s_per_m, k_r_nm_per_rad, k_w_nm_s_per_rad, max_tilt_rad,
     shaping_omega_rad_s, the adaptation rates c_p, c_v, c_r, c_w (feature units), a_max, and
     motor_tau_s (the lag the composite law assumes); the ones left out are the core's for the
-    vehicle the model carries. `Controller.named(NAME)` gives the bridge's controllers."""
+    vehicle the model carries. A gain that is negative, NaN or infinite raises ValueError
+    naming it. `Controller.named(NAME)` gives the bridge's controllers."""
 
     def __init__(
         self,
@@ -234,10 +235,10 @@ class Controller:
 
         p (3,) m world; R (3, 3) body->world; v_body (3,) m/s and w_body (3,) rad/s in the body
         frame; setpoint a Setpoint, a position (3,) or a dict with the bridge's keys; dt s; acc
-        the accelerometer's specific force (3,) m/s^2 body, or None. Arrays are float64 or
-        float32 (or sequences), cast to f32 as the bridge casts them; another shape or dtype
-        raises ValueError naming the argument. A bad state, setpoint or dt is not an exception:
-        the motors go off and `faults.fault` is set."""
+        the accelerometer's specific force (3,) m/s^2 body, or None. Arrays are float64,
+        float32 or integer (or sequences), cast to f32 as the bridge casts them; another shape
+        or dtype raises ValueError naming the argument. A bad state, setpoint or dt is not an
+        exception: the motors go off and `faults.fault` is set."""
     def reset(self) -> None:
         """Clears the adaptation estimate and the filters (the model and gains stay)."""
     def set_gains(self, *, law: Optional[str] = None, adapt: Optional[bool] = None, **gains: float) -> None:
@@ -413,17 +414,43 @@ class Plant:
 class FlightResult:
     """A flown SITL flight: per-tick numpy arrays and report.json's scores.
 
-    t_s (n,), p_m and p_ref_m (n, 3), err_m (n,), rpm (n, 4), adaptation (n, 6) or (n, 0);
-    `report` is the dict `host-train eval` writes as report.json, `rmse_m` and `crashed` two of
-    its scores."""
+    t_s (n,), p_m and p_ref_m (n, 3), err_m (n,), rpm (n, 4), adaptation (n, 6) or (n, 0); the
+    true state rpy_rad, v_world_m_s, w_body_rad_s (n, 3); the state the controller flew on
+    est_p_m, est_v_world_m_s, est_rpy_rad, est_w_body_rad_s (n, 3): with a `[sensors]` section
+    the estimator's output (and the filtered gyro), else the truth plus the scenario's noise (the
+    truth itself without noise). Row i is tick t_s[i]. `report` is the dict `host-train eval`
+    writes as report.json, `rmse_m` and `crashed` two of its scores."""
 
     t_s: npt.NDArray[np.float64]
+    """Tick times (s), (n,)."""
     p_m: npt.NDArray[np.float64]
+    """Flown (true) position (m, world), (n, 3)."""
     p_ref_m: npt.NDArray[np.float64]
+    """Desired position (m, world), (n, 3)."""
     err_m: npt.NDArray[np.float64]
+    """|p − p*| (m), (n,)."""
     rpm: npt.NDArray[np.float64]
+    """Rotor commands (rpm), (n, 4)."""
     adaptation: npt.NDArray[np.float64]
+    """The adaptation estimate a, (n, 6); (n, 0) for a controller that does not adapt."""
+    rpy_rad: npt.NDArray[np.float64]
+    """True attitude as roll, pitch, yaw (rad, Z-Y-X: R = Rz(yaw) Ry(pitch) Rx(roll)), (n, 3)."""
+    v_world_m_s: npt.NDArray[np.float64]
+    """True velocity (m/s, world), (n, 3)."""
+    w_body_rad_s: npt.NDArray[np.float64]
+    """True body rates ω (rad/s, body frame), (n, 3)."""
+    est_p_m: npt.NDArray[np.float64]
+    """The position the controller was given (m, world), (n, 3): the estimator's with a
+    `[sensors]` section, else the true one plus the scenario's noise."""
+    est_v_world_m_s: npt.NDArray[np.float64]
+    """The velocity the controller was given (m/s, world), (n, 3)."""
+    est_rpy_rad: npt.NDArray[np.float64]
+    """The attitude the controller was given, roll, pitch, yaw (rad, as rpy_rad), (n, 3)."""
+    est_w_body_rad_s: npt.NDArray[np.float64]
+    """The body rates the controller was given (rad/s, body frame; the filtered gyro with a
+    `[sensors]` section), (n, 3)."""
     report: Dict[str, Any]
+    """The scores (the keys of `host-train eval`'s report.json)."""
     @property
     def rmse_m(self) -> Optional[float]:
         """Position RMSE over t ≥ 5 s (m), None if the flight ended before."""

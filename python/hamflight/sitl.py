@@ -4,6 +4,7 @@ and its TOML scenario files, from Python.
 >>> from hamflight import sitl
 >>> log = sitl.fly("scenarios/paper-spiral.toml", "adaptive")
 >>> log.rmse_m, log.p_m.shape          # RMSE over t >= 5 s (m), (ticks, 3) positions
+>>> log.rpy_rad, log.v_world_m_s, log.est_p_m   # attitude, velocity, the estimate flown on
 
 ``fly`` takes a scenario (a :class:`Scenario` or a path) and a controller: a name
 (:func:`controllers` lists them; the learned ones fly the shipped blob unless ``weights`` is

@@ -2,7 +2,8 @@
 //! promises: a wrong shape or dtype is a `ValueError` that names the expected shape.
 
 use numpy::{
-    PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
+    PyArray1, PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -25,7 +26,7 @@ fn shape_text(shape: &[usize]) -> String {
 
 fn bad_input(name: &str, expected: &[usize], got: String) -> PyErr {
     PyValueError::new_err(format!(
-        "{name}: expected a float64 or float32 array of shape {}, got {got}",
+        "{name}: expected a float or integer array of shape {}, got {got}",
         shape_text(expected)
     ))
 }
@@ -39,7 +40,7 @@ fn asarray<'py>(py: Python<'py>, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py,
     f.bind(py).call1((obj, "float64"))
 }
 
-/// Copies `obj` (a float64/float32 ndarray of exactly `shape`, or a nested sequence of numbers
+/// Copies `obj` (a float64, float32 or integer ndarray of exactly `shape`, or a nested sequence of numbers
 /// of that shape) into `out` in C order. `out.len()` is the product of `shape`.
 pub fn read_into(
     obj: &Bound<'_, PyAny>,
@@ -99,6 +100,18 @@ pub fn read_into(
         }
         return Ok(());
     }
+    // Integer arrays are numbers too, as a list of ints is: numpy's float64 of them.
+    if matches!(dtype.kind(), b'i' | b'u') {
+        let converted = asarray(obj.py(), arr.as_any())?;
+        if let Ok(a) = converted.cast::<PyArrayDyn<f64>>() {
+            // SAFETY: as above (a new array, only here).
+            let v = unsafe { a.as_array() };
+            for (o, x) in out.iter_mut().zip(v.iter()) {
+                *o = *x;
+            }
+            return Ok(());
+        }
+    }
     Err(bad_input(name, shape, describe()))
 }
 
@@ -149,7 +162,7 @@ pub fn leading_dim(obj: &Bound<'_, PyAny>, name: &str, rest: &[usize]) -> PyResu
         let mut want = vec!["N".to_string()];
         want.extend(rest.iter().map(|d| d.to_string()));
         Err(PyValueError::new_err(format!(
-            "{name}: expected a float64 or float32 array of shape ({}), got shape {}",
+            "{name}: expected a float or integer array of shape ({}), got shape {}",
             want.join(", "),
             shape_text(s)
         )))

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use host_train::control::{Controller as HostController, CoreController};
-use host_train::fly::{fly_scenario, FlightLog, Report};
+use host_train::fly::{fly_with_states, FlightLog, Report, StateLog};
 use host_train::sim::{Scenario as HostScenario, ScenarioSpec, TrajectoryPoint};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
@@ -241,21 +241,24 @@ enum Pilot {
 }
 
 /// One flight, without the GIL.
-fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<FlightLog> {
+fn fly_one(scenario: &HostScenario, pilot: &Pilot) -> anyhow::Result<(FlightLog, StateLog)> {
     let mut ctrl: Box<dyn HostController> = match pilot {
         Pilot::Baseline(name) => host_train::control::baseline_by_name(name, scenario)?,
         Pilot::Core(name, model, gains) => {
             Box::new(CoreController::new(name, model.clone(), **gains))
         }
     };
-    Ok(fly_scenario(scenario, ctrl.as_mut()))
+    Ok(fly_with_states(scenario, ctrl.as_mut()))
 }
 
 /// A flown SITL flight: per-tick numpy arrays and report.json's scores.
 ///
-/// t_s (n,), p_m and p_ref_m (n, 3), err_m (n,), rpm (n, 4), adaptation (n, 6) or (n, 0);
-/// `report` is the dict `host-train eval` writes as report.json, `rmse_m` and `crashed` two of
-/// its scores.
+/// t_s (n,), p_m and p_ref_m (n, 3), err_m (n,), rpm (n, 4), adaptation (n, 6) or (n, 0); the
+/// true state rpy_rad, v_world_m_s, w_body_rad_s (n, 3); the state the controller flew on
+/// est_p_m, est_v_world_m_s, est_rpy_rad, est_w_body_rad_s (n, 3): with a `[sensors]` section
+/// the estimator's output (and the filtered gyro), else the truth plus the scenario's noise (the
+/// truth itself without noise). Row i is tick t_s[i]. `report` is the dict `host-train eval`
+/// writes as report.json, `rmse_m` and `crashed` two of its scores.
 #[pyclass(module = "hamflight._core", frozen)]
 pub struct FlightResult {
     /// Tick times (s), (n,).
@@ -276,6 +279,29 @@ pub struct FlightResult {
     /// The adaptation estimate a, (n, 6); (n, 0) for a controller that does not adapt.
     #[pyo3(get)]
     adaptation: Py<PyArray2<f64>>,
+    /// True attitude as roll, pitch, yaw (rad, Z-Y-X: R = Rz(yaw) Ry(pitch) Rx(roll)), (n, 3).
+    #[pyo3(get)]
+    rpy_rad: Py<PyArray2<f64>>,
+    /// True velocity (m/s, world), (n, 3).
+    #[pyo3(get)]
+    v_world_m_s: Py<PyArray2<f64>>,
+    /// True body rates ω (rad/s, body frame), (n, 3).
+    #[pyo3(get)]
+    w_body_rad_s: Py<PyArray2<f64>>,
+    /// The position the controller was given (m, world), (n, 3): the estimator's with a
+    /// `[sensors]` section, else the true one plus the scenario's noise.
+    #[pyo3(get)]
+    est_p_m: Py<PyArray2<f64>>,
+    /// The velocity the controller was given (m/s, world), (n, 3).
+    #[pyo3(get)]
+    est_v_world_m_s: Py<PyArray2<f64>>,
+    /// The attitude the controller was given, roll, pitch, yaw (rad, as rpy_rad), (n, 3).
+    #[pyo3(get)]
+    est_rpy_rad: Py<PyArray2<f64>>,
+    /// The body rates the controller was given (rad/s, body frame; the filtered gyro with a
+    /// `[sensors]` section), (n, 3).
+    #[pyo3(get)]
+    est_w_body_rad_s: Py<PyArray2<f64>>,
     /// The scores (the keys of `host-train eval`'s report.json).
     #[pyo3(get)]
     report: Py<PyAny>,
@@ -311,7 +337,11 @@ fn rows<const K: usize>(py: Python<'_>, v: &[[f64; K]]) -> PyResult<Py<PyArray2<
     Ok(PyArray1::from_vec(py, flat).reshape([v.len(), K])?.unbind())
 }
 
-fn result(py: Python<'_>, log: &FlightLog, scenario: &HostScenario) -> PyResult<FlightResult> {
+fn result(
+    py: Python<'_>,
+    (log, st): &(FlightLog, StateLog),
+    scenario: &HostScenario,
+) -> PyResult<FlightResult> {
     let report = Report::from_flight(log, scenario, scenario.path.as_deref());
     let text =
         serde_json::to_string(&report).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
@@ -329,6 +359,13 @@ fn result(py: Python<'_>, log: &FlightLog, scenario: &HostScenario) -> PyResult<
         adaptation: PyArray1::from_vec(py, adapt)
             .reshape([log.adaptation.len(), k])?
             .unbind(),
+        rpy_rad: rows(py, &log.rpy_rad)?,
+        v_world_m_s: rows(py, &st.v_world_m_s)?,
+        w_body_rad_s: rows(py, &st.w_body_rad_s)?,
+        est_p_m: rows(py, &st.est_p_m)?,
+        est_v_world_m_s: rows(py, &st.est_v_world_m_s)?,
+        est_rpy_rad: rows(py, &st.est_rpy_rad)?,
+        est_w_body_rad_s: rows(py, &st.est_w_body_rad_s)?,
         report: json_loads(py, &text)?.unbind(),
     })
 }
@@ -368,8 +405,8 @@ pub fn fly(
             Pilot::Baseline(name)
         }
     };
-    let log = py.detach(|| fly_one(&sc, &pilot)).map_err(err)?;
-    result(py, &log, &sc)
+    let flown = py.detach(|| fly_one(&sc, &pilot)).map_err(err)?;
+    result(py, &flown, &sc)
 }
 
 /// The registry's controllers as (name, description) pairs: the core's (`CONTROLLER_NAMES`),

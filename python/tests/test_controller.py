@@ -51,7 +51,8 @@ def test_step_gives_a_typed_result_with_named_fields():
         ("R", np.eye(4), "(3, 3)"),
         ("R", np.zeros(9), "(3, 3)"),
         ("v_body", np.zeros(2), "(3,)"),
-        ("w_body", np.zeros(3, dtype=np.int64), "(3,)"),
+        ("w_body", np.zeros(3, dtype=np.complex128), "(3,)"),
+        ("w_body", np.zeros(3, dtype=bool), "(3,)"),
         ("w_body", "abc", "(3,)"),
         ("acc", np.zeros(5), "(3,)"),
     ],
@@ -70,6 +71,47 @@ def test_inputs_may_be_float32_or_lists_and_give_the_same_result():
     c = step(hamflight.Controller(), p=np.array([0.0, 0.0, 0.5, 9.0])[:3], R=np.asfortranarray(np.eye(3)))
     np.testing.assert_array_equal(a.rpm, b.rpm)
     np.testing.assert_array_equal(a.rpm, c.rpm)
+
+
+def test_integer_arrays_are_accepted_as_floats_are():
+    acc = np.array([0.0, 0.0, 10.0])
+    a = step(hamflight.Controller(), p=np.array([0.0, 0.0, 1.0]), setpoint=np.array([1.0, 0.0, 1.0]), acc=acc)
+    b = step(hamflight.Controller(), p=np.array([0, 0, 1]), R=np.eye(3, dtype=np.int32), v_body=np.zeros(3, np.int8),
+             w_body=np.zeros(3, np.uint16), setpoint=np.array([1, 0, 1]), acc=acc.astype(np.int64))
+    np.testing.assert_array_equal(a.rpm, b.rpm)
+    c = step(hamflight.Controller(), p=np.array([0, 0, 1]), setpoint=hamflight.Setpoint(np.array([1, 0, 1]), v_m_s=np.zeros(3, int)), acc=acc)
+    d = step(hamflight.Controller(), p=np.array([0, 0, 1]), setpoint={"p": np.array([1, 0, 1]), "yaw": np.int64(0)}, acc=acc)
+    np.testing.assert_array_equal(a.rpm, c.rpm)
+    np.testing.assert_array_equal(a.rpm, d.rpm)
+    n = 3
+    floats = [np.tile([0.0, 0.0, 1.0], (n, 1)), np.repeat(np.eye(3)[None], n, axis=0), np.zeros((n, 3)), np.zeros((n, 3))]
+    ints = [x.astype(np.int64) for x in floats]
+    sp = {"p": np.tile([1, 0, 1], (n, 1)), "yaw": np.zeros(n, np.int32)}
+    x = hamflight.ControllerBatch(n).step(*floats, {"p": np.tile([1.0, 0.0, 1.0], (n, 1))}, 0.002)
+    y = hamflight.ControllerBatch(n).step(*ints, sp, 0.002, acc=None)
+    np.testing.assert_array_equal(x.rpm, y.rpm)
+    # The SITL plant's rotor speeds too.
+    plant = hamflight.sitl.Plant(hamflight.sitl.Scenario.load("hover"))
+    o1 = plant.step_rpm(np.full(4, 15000.0))
+    plant.reset()
+    np.testing.assert_array_equal(o1, plant.step_rpm(np.full(4, 15000)))
+
+
+@pytest.mark.parametrize("gain, value", [("k_p_n_per_m", -1.0), ("c_v", float("nan")), ("motor_tau_s", float("inf")), ("a_max", 1e39)])
+def test_negative_or_non_finite_gains_are_refused_naming_the_gain(gain, value):
+    msg = rf"^{gain}: expected a finite number >= 0, got "
+    with pytest.raises(ValueError, match=msg):
+        hamflight.Controller(**{gain: value})
+    with pytest.raises(ValueError, match=msg):
+        hamflight.Controller.named("adaptive", **{gain: value})
+    with pytest.raises(ValueError, match=msg):
+        hamflight.ControllerBatch(2, **{gain: value})
+    c = hamflight.Controller()
+    before = c.gains
+    with pytest.raises(ValueError, match=msg):
+        c.set_gains(k_v_n_s_per_m=0.5, **{gain: value})
+    assert c.gains == before  # nothing changed
+    assert hamflight.Controller(**{gain: 0.0}).gains[gain] == 0.0  # zero is a gain (off)
 
 
 def test_setpoint_forms_agree():

@@ -55,18 +55,23 @@ def normalized(doc):
 
 
 def stub_docstrings():
-    """(dotted name, docstring) of every class, method, property and function the stubs document."""
+    """(dotted name, docstring) of every class, method, property, function and attribute (its
+    docstring the string after it) the stubs document."""
     tree = ast.parse(STUBS.read_text(encoding="utf-8"))
     found = []
 
     def visit(nodes, prefix):
-        for node in nodes:
+        for node, after in zip(nodes, nodes[1:] + [None]):
             if isinstance(node, (ast.ClassDef, ast.FunctionDef)):
                 doc = ast.get_docstring(node)
                 if doc:
                     found.append((prefix + node.name, doc))
                 if isinstance(node, ast.ClassDef):
                     visit(node.body, f"{prefix}{node.name}.")
+            elif (prefix and isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                  and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
+                  and isinstance(after.value.value, str)):
+                found.append((prefix + node.target.id, inspect.cleandoc(after.value.value)))
 
     visit(tree.body, "")
     return found
@@ -79,6 +84,7 @@ def test_the_stubs_are_read():
     names = [n for n, _ in STUB_DOCS]
     assert len(names) > 30, names
     assert {"Controller", "Controller.step", "Blob.load", "Scenario.__reduce__", "Plant.step_rpm"} <= set(names)
+    assert {"FlightResult.t_s", "FlightResult.est_p_m", "FlightResult.report"} <= set(names)
 
 
 @pytest.mark.parametrize("name, doc", STUB_DOCS, ids=[n for n, _ in STUB_DOCS])

@@ -94,6 +94,12 @@ pub fn gains_from_kwargs(
                     GAIN_KEYS.join(", ")
                 )));
             };
+            // Every gain is a rate, a bound or a time constant: finite (as f32 too) and ≥ 0.
+            if !(value >= 0.0 && (value as f32).is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "{key}: expected a finite number >= 0, got {value}"
+                )));
+            }
             *slot = value as f32;
         }
     }

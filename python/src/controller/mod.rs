@@ -93,7 +93,8 @@ pub(super) fn measurement(acc: Option<&Bound<'_, PyAny>>) -> PyResult<Measuremen
 /// k_p_n_per_m, k_v_n_s_per_m, k_r_nm_per_rad, k_w_nm_s_per_rad, max_tilt_rad,
 /// shaping_omega_rad_s, the adaptation rates c_p, c_v, c_r, c_w (feature units), a_max, and
 /// motor_tau_s (the lag the composite law assumes); the ones left out are the core's for the
-/// vehicle the model carries. `Controller.named(NAME)` gives the bridge's controllers.
+/// vehicle the model carries. A gain that is negative, NaN or infinite raises ValueError
+/// naming it. `Controller.named(NAME)` gives the bridge's controllers.
 #[pyclass(module = "hamflight._core")]
 pub struct Controller {
     pub inner: FlightController<AnyModel>,
@@ -215,10 +216,10 @@ impl Controller {
     ///
     /// p (3,) m world; R (3, 3) body->world; v_body (3,) m/s and w_body (3,) rad/s in the body
     /// frame; setpoint a Setpoint, a position (3,) or a dict with the bridge's keys; dt s; acc
-    /// the accelerometer's specific force (3,) m/s^2 body, or None. Arrays are float64 or
-    /// float32 (or sequences), cast to f32 as the bridge casts them; another shape or dtype
-    /// raises ValueError naming the argument. A bad state, setpoint or dt is not an exception:
-    /// the motors go off and `faults.fault` is set.
+    /// the accelerometer's specific force (3,) m/s^2 body, or None. Arrays are float64,
+    /// float32 or integer (or sequences), cast to f32 as the bridge casts them; another shape
+    /// or dtype raises ValueError naming the argument. A bad state, setpoint or dt is not an
+    /// exception: the motors go off and `faults.fault` is set.
     #[pyo3(signature = (p, R, v_body, w_body, setpoint, dt, acc=None))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn step(
