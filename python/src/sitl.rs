@@ -323,11 +323,20 @@ impl FlightResult {
         self.report.bind(py).get_item("crashed")?.extract()
     }
     fn __repr__(&self, py: Python<'_>) -> String {
+        // The scores as Python spells them (None, True), not as Rust does (Some(true)).
+        let score = |key: &str| {
+            self.report
+                .bind(py)
+                .get_item(key)
+                .and_then(|v| v.repr())
+                .map(|r| r.to_string())
+                .unwrap_or_else(|_| "None".into())
+        };
         format!(
-            "FlightResult(ticks={}, rmse_m={:?}, crashed={:?})",
+            "FlightResult(ticks={}, rmse_m={}, crashed={})",
             numpy::PyUntypedArrayMethods::len(self.t_s.bind(py).as_untyped()),
-            self.rmse_m(py).ok().flatten(),
-            self.crashed(py).ok()
+            score("rmse_pos_window_m"),
+            score("crashed")
         )
     }
 }

@@ -26,6 +26,7 @@ def test_fly_a_scenario_file_and_get_numpy_arrays():
     assert log.rmse_m < 0.002  # 0.022 cm in docs/adaptation.md, with margin
     np.testing.assert_allclose(np.linalg.norm(log.p_m - log.p_ref_m, axis=1), log.err_m)
     assert log.report["scenario"] == "paper-spiral" and log.report["controller"] == "adaptive"
+    assert repr(log) == f"FlightResult(ticks=15001, rmse_m={log.rmse_m!r}, crashed=False)"
 
 
 def test_a_python_controller_flies_like_its_name():
@@ -40,6 +41,12 @@ def test_baselines_fly_and_the_registry_lists_them():
     assert {"pid", "geometric", "adaptive", "adaptive-composite"} <= set(names)
     log = sitl.fly(SCEN / "hover.toml", "geometric")
     assert log.adaptation.shape[1] == 0 and not log.crashed
+    # The DSL PID rolls over on paper-spiral: the log stops at the crash, every array aligned.
+    crash = sitl.fly(SCEN / "paper-spiral.toml", "pid")
+    n = len(crash.t_s)
+    assert crash.crashed and crash.rmse_m is None and n < 1000
+    assert repr(crash) == f"FlightResult(ticks={n}, rmse_m=None, crashed=True)"
+    assert crash.rpy_rad.shape == crash.est_w_body_rad_s.shape == (n, 3)
 
 
 def test_scenarios_round_trip_through_dicts_and_toml():
