@@ -150,6 +150,8 @@ static hf_output_t hfOut;
 /* Flight phase. */
 static uint8_t phase = HF_PHASE_OFF;
 static float groundZ;
+/* The controller was stopped while airborne (see disengage). */
+static bool offWhileAirborne;
 /* The reference the setpoint modes build: position (world) and yaw. */
 static float refP[3];
 static float refYaw;
@@ -453,13 +455,19 @@ static void zeroOutput(control_t *control) {
 static void disengage(void) {
   hf_reset(&ctl);
   hf_set_adapt(&ctl, false);
+  /* A stop in flight (a stop setpoint for one tick, e.g. cflib's on closing a link) must not make
+   * the next engagement take the current height for the ground: it would never be airborne again
+   * (no adaptation, swaps in flight). */
+  offWhileAirborne = offWhileAirborne || phase == HF_PHASE_AIRBORNE;
   phase = HF_PHASE_OFF;
 }
 
 /* Hands the app task a pending swap (an upload that passed its check, or a revert) if the
  * vehicle is not airborne; true if it did (the caller outputs zero). */
 static HF_NOINLINE bool startSwapIfDue(void) {
-  if (!isInit || phase == HF_PHASE_AIRBORNE || swapping()) {
+  /* Stopped in flight and still flying (see disengage): as airborne as AIRBORNE. */
+  const bool airborne = phase == HF_PHASE_AIRBORNE || (offWhileAirborne && supervisorIsFlying());
+  if (!isInit || airborne || swapping()) {
     return false;
   }
   uint8_t next;
@@ -603,7 +611,19 @@ static HF_NOINLINE void applyParams(void) {
 /* GROUND / AIRBORNE / LANDED (see the top of the file). */
 static HF_NOINLINE void updatePhase(const hf_state_t *s) {
   const bool flying = supervisorIsFlying();
+  if (phase == HF_PHASE_OFF && offWhileAirborne && flying) {
+    /* Re-engaged in flight after a stop: airborne again, over the ground it took off from; the
+     * adaptation restarts from a = 0. */
+    offWhileAirborne = false;
+    phase = HF_PHASE_AIRBORNE;
+    for (int i = 0; i < 3; i++) {
+      refP[i] = s->p_m[i];
+    }
+    refYaw = yawOfRot(s->rot);
+    hf_reset(&ctl);
+  }
   if (phase == HF_PHASE_OFF) {
+    offWhileAirborne = false;
     phase = HF_PHASE_GROUND;
     groundZ = s->p_m[2];
     for (int i = 0; i < 3; i++) {
@@ -661,6 +681,7 @@ void controllerOutOfTreeInit(void) {
   } else {
     phase = HF_PHASE_OFF;
   }
+  offWhileAirborne = false; /* an init starts over: the next engagement finds the ground */
   zeroWrench();
   updateLogs();
   DEBUG_PRINT("model %s crc %08X, %d g, %d Hz\n", hf_model_name(), (unsigned int)hf_model_crc(),

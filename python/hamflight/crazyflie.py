@@ -281,38 +281,83 @@ G_M_S2 = 9.81
 
 
 class CsvLogWriter:
-    """Joins the three blocks into the importer's CSV rows: a row at each ``hfCmd`` sample whose
-    ``hfPosVel`` and ``hfAttGyro`` samples carry a timestamp within ``tolerance_ms`` of it
-    (blocks of one period usually share the firmware tick; a row with a stale block is dropped and
-    counted in ``dropped``). Time is the firmware's millisecond timestamp, in s."""
+    """Joins the three blocks into the importer's CSV rows: a row at each ``hfCmd`` sample, with
+    the ``hfPosVel`` and ``hfAttGyro`` values interpolated to its timestamp from their samples on
+    either side (linear; the quaternion normalized, sign-aligned). The blocks run on timers of
+    their own, started one after the other, so their samples need not share a tick: the whole
+    firmware in SITL put them 6-9 ms apart, and an earlier exact-match join within 5 ms dropped
+    every row. A row waits until both blocks have a sample at or after it; one whose neighbours
+    are more than ``max_gap_ms`` apart (a lost packet), or with no sample before it, is dropped and
+    counted in ``dropped``, as are the rows still waiting at :meth:`finish`. Time is the
+    firmware's millisecond timestamp, in s."""
 
-    def __init__(self, out: TextIO, tolerance_ms: float = 5.0):
+    STATE_BLOCKS = ("hfPosVel", "hfAttGyro")
+
+    def __init__(self, out: TextIO, max_gap_ms: float = 30.0):
         self.writer = csv.writer(out, lineterminator="\n")
         self.writer.writerow(CSV_COLUMNS)
-        self.tolerance_ms = tolerance_ms
-        self.latest: Dict[str, Tuple[int, Dict[str, float]]] = {}
+        self.max_gap_ms = max_gap_ms
+        self.history: Dict[str, List[Tuple[int, Dict[str, float]]]] = {b: [] for b in self.STATE_BLOCKS}
+        self.pending: List[Tuple[int, Dict[str, float]]] = []
         self.rows = 0
         self.dropped = 0
 
     def add(self, block: str, timestamp_ms: int, data: Dict[str, float]) -> None:
         """One log packet, as cflib's ``LogConfig.data_received_cb`` gives it."""
-        self.latest[block] = (timestamp_ms, data)
         if block == "hfCmd":
-            self._row(timestamp_ms, data)
+            self.pending.append((timestamp_ms, data))
+        elif block in self.history:
+            h = self.history[block]
+            h.append((timestamp_ms, data))
+            del h[:-8]
+        self._flush()
 
-    def _row(self, t_ms: int, cmd: Dict[str, float]) -> None:
-        pv = self.latest.get("hfPosVel")
-        ag = self.latest.get("hfAttGyro")
-        if pv is None or ag is None or abs(pv[0] - t_ms) > self.tolerance_ms or abs(ag[0] - t_ms) > self.tolerance_ms:
-            self.dropped += 1
-            return
-        p, a = pv[1], ag[1]
+    def finish(self) -> None:
+        """The log ended: rows still waiting for a later state sample are dropped."""
+        self.dropped += len(self.pending)
+        self.pending.clear()
+
+    def _state_at(self, block: str, t_ms: int):
+        """(values at t_ms) or "wait" (no sample at or after t_ms yet) or None (cannot be had)."""
+        h = self.history[block]
+        if not h or h[-1][0] < t_ms:
+            return "wait"
+        after = next(i for i, (t, _) in enumerate(h) if t >= t_ms)
+        ta, a = h[after]
+        if ta == t_ms:
+            return dict(a)
+        if after == 0:
+            return None
+        tb, b = h[after - 1]
+        if ta - tb > self.max_gap_ms:
+            return None
+        quat = [f"stateEstimate.q{c}" for c in "wxyz"]
+        if all(k in a for k in quat) and sum(a[k] * b[k] for k in quat) < 0:
+            a = {**a, **{k: -a[k] for k in quat}}  # q and -q are one attitude: take the near one
+        u = (t_ms - tb) / (ta - tb)
+        return {k: b[k] + u * (a[k] - b[k]) for k in a}
+
+    def _flush(self) -> None:
+        while self.pending:
+            t_ms, cmd = self.pending[0]
+            states = [self._state_at(b, t_ms) for b in self.STATE_BLOCKS]
+            if any(st == "wait" for st in states):
+                return
+            self.pending.pop(0)
+            if any(st is None for st in states):
+                self.dropped += 1
+                continue
+            self._row(t_ms, states[0], states[1], cmd)
+
+    def _row(self, t_ms: int, p: Dict[str, float], a: Dict[str, float], cmd: Dict[str, float]) -> None:
         d2r = math.pi / 180.0
         s = "stateEstimate."
+        q = [a[s + "qw"], a[s + "qx"], a[s + "qy"], a[s + "qz"]]
+        n = math.sqrt(sum(c * c for c in q)) or 1.0
         row = [
             t_ms / 1000.0,
             p[s + "x"], p[s + "y"], p[s + "z"],
-            a[s + "qw"], a[s + "qx"], a[s + "qy"], a[s + "qz"],
+            *(c / n for c in q),
             p[s + "vx"], p[s + "vy"], p[s + "vz"],
             a["gyro.x"] * d2r, a["gyro.y"] * d2r, cmd["gyro.z"] * d2r,
             cmd["hamflight.thrust"], cmd["hamflight.tx"], cmd["hamflight.ty"], cmd["hamflight.tz"],
@@ -523,8 +568,30 @@ def _import_cflib():
     global _drivers_ready
     if not _drivers_ready:
         cflib.crtp.init_drivers()
+        _resend_over_udp(cflib.crtp)
         _drivers_ready = True
     return Crazyflie
+
+
+def _resend_over_udp(crtp) -> None:
+    """cflib resends a request whose reply has not come (a TOC item, a parameter, a log block, a
+    memory read or write) only over a link that says it ``needs_resending``; its UDP driver says no,
+    and a simulated Crazyflie (the firmware as a Linux process, tools/firmware-sitl) drops packets
+    when its 5-packet socket queue is full: one lost request then stalls the connection for good
+    (one connection in two or three, measured). This swaps cflib's UDP driver for one that asks for
+    cflib's own resending, as its radio driver does."""
+    try:
+        from cflib.crtp.udpdriver import UdpDriver
+    except ImportError:
+        return
+
+    class ResendingUdpDriver(UdpDriver):
+        def connect(self, *args, **kwargs):
+            result = UdpDriver.connect(self, *args, **kwargs)
+            self.needs_resending = True
+            return result
+
+    crtp.CLASSES[:] = [ResendingUdpDriver if c is UdpDriver else c for c in crtp.CLASSES]
 
 
 _drivers_ready = False
@@ -579,6 +646,15 @@ class Link:
         return False
 
     def _close(self) -> None:
+        # cflib's close_link first sends a zero setpoint (thrust 0: the motors stop until the
+        # pilot's next setpoint). hamflight-cf never flies, and may run beside the pilot (logging
+        # a flight, an upload that waits for the landing): it must not command the vehicle. Seen
+        # through the whole firmware in SITL: each hamflight-cf exit cut the motors for a setpoint
+        # period in flight.
+        try:
+            self.cf.commander.send_setpoint = lambda *args, **kwargs: None
+        except AttributeError:
+            pass
         try:
             self.cf.close_link()
         except Exception:  # closing a broken link must not hide why it broke
@@ -723,7 +799,9 @@ def _cmd_log(args) -> int:
             if link.lost is None:
                 for lc in configs:
                     lc.stop()
-            print(f"{w.rows} rows, {w.dropped} dropped (blocks out of step)")
+            with lock:
+                w.finish()
+            print(f"{w.rows} rows, {w.dropped} dropped (a state sample lost or missing)")
         if link.lost is not None:
             raise CliError(f"the link to {args.uri} was lost after {w.rows} rows (kept in {args.out}): {link.lost}")
     return 0

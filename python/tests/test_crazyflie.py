@@ -12,6 +12,8 @@ delivers them. cflib's chunking, reply matching and callbacks run unmodified.
 import os
 import pathlib
 import queue
+import csv
+import io
 import re
 import struct
 import subprocess
@@ -266,7 +268,44 @@ def synthetic_hover(path, seconds=6.0, mass_kg=0.027):
         # A command whose state blocks are stale is dropped, not joined.
         w.add("hfCmd", 1000 + 10 * n + 500, {"gyro.z": 0.0, "hamflight.thrust": 0.1, "hamflight.tx": 0.0,
                                               "hamflight.ty": 0.0, "hamflight.tz": 0.0, "acc.x": 0.0, "acc.y": 0.0, "acc.z": 1.0})
+        w.finish()
     return w
+
+
+CMD = {"gyro.z": 0.0, "hamflight.thrust": 0.3, "hamflight.tx": 0.0, "hamflight.ty": 0.0, "hamflight.tz": 0.0,
+       "acc.x": 0.0, "acc.y": 0.0, "acc.z": 1.0}
+
+
+def pos_vel(z):
+    return {f"stateEstimate.{v}": x for v, x in zip(("x", "y", "z", "vx", "vy", "vz"), (0.0, 0.0, z, 0.0, 0.0, 1.0))}
+
+
+def att_gyro(sign):
+    return {"stateEstimate.qw": sign, "stateEstimate.qx": 0.0, "stateEstimate.qy": 0.0, "stateEstimate.qz": 0.0,
+            "gyro.x": 0.0, "gyro.y": 0.0}
+
+
+def test_log_blocks_out_of_phase_are_interpolated_not_dropped():
+    # The blocks' timers run out of phase (the whole firmware in SITL: 6-9 ms): the state is
+    # interpolated to each command's timestamp; a gap of a lost packet drops the rows it spans.
+    f = io.StringIO()
+    w = hcf.CsvLogWriter(f)
+    for k in range(100):
+        t = 1000 + 10 * k
+        if k not in (50, 51, 52):  # three position samples lost: a 40 ms gap
+            w.add("hfPosVel", t + 7, pos_vel(0.001 * (t + 7)))
+        w.add("hfAttGyro", t + 3, att_gyro(1.0 if k % 2 else -1.0))  # q and -q alternate
+        w.add("hfCmd", t, CMD)
+    w.finish()
+    rows = list(csv.DictReader(io.StringIO(f.getvalue())))
+    # dropped: the first command (no position sample before it) and the four in the 40 ms gap
+    assert (w.rows, w.dropped) == (95, 5)
+    assert len(rows) == 95
+    for r in rows:
+        t_ms = 1000 * float(r["t_s"])
+        assert abs(float(r["pz_m"]) - 0.001 * t_ms) < 1e-9  # linear in time: exact
+        assert abs(abs(float(r["qw"])) - 1.0) < 1e-9  # never the zero between q and -q
+    assert 1500 not in [round(1000 * float(r["t_s"])) for r in rows]
 
 
 def test_the_log_csv_imports_with_host_train(tmp_path, bridge_binary):

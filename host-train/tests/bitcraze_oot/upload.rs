@@ -272,6 +272,59 @@ fn an_upload_in_flight_waits_for_the_landing() {
 }
 
 #[test]
+fn a_stop_setpoint_in_flight_resumes_airborne_and_an_upload_still_waits() {
+    // cflib sends a zero setpoint (thrust 0, z disabled) when it closes a link; with another pilot
+    // streaming setpoints the controller stops for one tick and engages again. It must come back
+    // airborne, with the ground it took off from: once it took the current height for the ground
+    // and was never airborne again (no adaptation, and an upload swapped in flight; found flying
+    // the whole firmware in SITL).
+    let mut shim = Shim::new();
+    let mut plant = scenario("hover").plant();
+    let start = plant.state().p_m.cast::<f32>();
+    shim.supervisor(true, true);
+    shim.set_param_f32("airHeight", 0.0); // airborne at once at the scenario's 1 m
+    let hold = move |shim: &mut Shim, _t: f64| {
+        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
+    };
+    fly_shim(&mut shim, &mut plant, 0.5, hold);
+    assert_eq!(shim.log_u8("phase"), 2, "airborne");
+    shim.set_param_f32("airHeight", 0.05);
+    let (_, blob) = other_blob(0.030);
+    assert!(shim.upload(&blob, &chunks(&blob)));
+    assert_eq!(shim.up_info().state, UP_PENDING);
+    // One tick of the stop setpoint, then the pilot's setpoints again for 1 s.
+    let dt = 1e-3;
+    for k in 0..1000 {
+        let s = *plant.state();
+        shim.set_state(&s);
+        if k == 0 {
+            shim.set_null_setpoint();
+        } else {
+            hold(&mut shim, 0.0);
+        }
+        let w = shim.tick();
+        // zero on the stop's tick and the odd tick after it (the 500 Hz gate), then flying on
+        // zero on the stop's tick and the odd tick after it (the 500 Hz gate), then flying on
+        assert_eq!(w[0] == 0.0, k < 2, "tick {k}: thrust {}", w[0]);
+        plant.step(plant.params.clamp_rpm(rpm_of(w)), dt);
+    }
+    assert_eq!(shim.log_u8("phase"), 2, "airborne again");
+    assert_eq!(
+        (shim.log_u8("blobSrc"), shim.up_info().state),
+        (0, UP_PENDING),
+        "the upload still waits for the landing"
+    );
+    assert!(
+        (plant.state().p_m.cast::<f32>() - start).norm() < 0.02,
+        "held the hover"
+    );
+    // Landed: it swaps in.
+    shim.supervisor(true, false);
+    shim.wait_for_swap();
+    assert_eq!(shim.up_info().state, UP_ACTIVE);
+}
+
+#[test]
 fn a_flight_with_the_uploaded_blob_matches_the_native_controller_with_it() {
     let (m, blob) = other_blob(0.030);
     let gains = Gains {
