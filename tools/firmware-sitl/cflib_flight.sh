@@ -6,7 +6,7 @@
 # (cargo build --release -p host-train) and hamflight-cf on PATH, or in $HAMFLIGHT_CF
 # (pip install the wheel with its crazyflie extra; cflib 0.1.34 was used).
 #
-# The plant flies a 40 s hover through the firmware (firmware_sitl_plant, its cflib relay on
+# The plant flies a 60 s hover through the firmware (firmware_sitl_plant, its cflib relay on
 # udp://127.0.0.1:19850), and while it flies:
 #   1. hamflight-cf params URI             reads every hamflight parameter;
 #   2. hamflight-cf params URI leash=0.25  sets one and reads it back;
@@ -51,7 +51,7 @@ cfx() { # log_file args...
     return 1
 }
 
-(cd "$root" && "$plant" --firmware "$fw" --scenario scenarios/hover.toml --hold-s 40 --linger-s 15 \
+(cd "$root" && "$plant" --firmware "$fw" --scenario scenarios/hover.toml --hold-s 60 --linger-s 15 \
     --out "$out/flight" >"$out/plant.log" 2>&1) &
 plant_pid=$!
 trap 'kill $plant_pid 2>/dev/null || true' EXIT

@@ -372,7 +372,7 @@ pub fn run() -> Result<()> {
                 } else if te < land_end {
                     let sp = smooth_move(top, bottom, args.land_s, te - hold_end, yaw0);
                     ("land", Some(sp))
-                } else if te < land_end + 1.0 + args.linger_s {
+                } else if te < land_end + 1.0 {
                     ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
                 } else if te < land_end + 2.0 + args.linger_s {
                     ("stop", None)

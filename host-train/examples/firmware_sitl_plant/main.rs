@@ -104,9 +104,9 @@ struct Args {
     /// the motors never stop.
     #[arg(long)]
     link_loss_s: Option<f64>,
-    /// Seconds to stay on the ground after the landing, with the firmware running, before the stop
-    /// setpoint (for a cflib client that waits for something the landing allows, e.g. a deferred
-    /// weight swap).
+    /// Seconds to stay on the ground after the stop setpoint that ends the flight, the firmware
+    /// still running (for a cflib client that waits for something the landing allows, e.g. a
+    /// deferred weight swap).
     #[arg(long, default_value_t = 0.0)]
     linger_s: f64,
     /// Reset the firmware's Kalman estimator this many seconds into the hold
