@@ -51,7 +51,7 @@ cfx() { # log_file args...
     return 1
 }
 
-(cd "$root" && "$plant" --firmware "$fw" --scenario scenarios/hover.toml --hold-s 60 --linger-s 15 \
+(cd "$root" && exec "$plant" --firmware "$fw" --scenario scenarios/hover.toml --hold-s 60 --linger-s 15 \
     --out "$out/flight" >"$out/plant.log" 2>&1) &
 plant_pid=$!
 trap 'kill $plant_pid 2>/dev/null || true' EXIT
