@@ -342,3 +342,43 @@ def test_params_assignments_are_checked():
         hcf.parse_assignments(["nope=1"])
     with pytest.raises(ValueError):
         hcf.parse_assignments(["law"])
+
+
+def test_closing_the_link_sends_no_setpoint():
+    # cflib's close_link sends a zero setpoint (motors off until the pilot's next one); hamflight-cf
+    # runs beside a pilot and must not command the vehicle.
+    sent = []
+
+    class Commander:
+        def send_setpoint(self, *args):
+            sent.append(args)
+
+    class FakeCf:
+        commander = Commander()
+        closed = False
+
+        def close_link(self):
+            self.commander.send_setpoint(0, 0, 0, 0)
+            self.closed = True
+
+    link = hcf.Link("udp://127.0.0.1:1")
+    link.cf = FakeCf()
+    link._close()
+    assert link.cf.closed and sent == []
+
+
+def test_udp_links_ask_for_cflibs_resending():
+    import types
+
+    from cflib.crtp.udpdriver import UdpDriver
+
+    crtp = types.SimpleNamespace(CLASSES=[object, UdpDriver])
+    hcf._resend_over_udp(crtp)
+    assert crtp.CLASSES[0] is object and crtp.CLASSES[1] is not UdpDriver
+    driver = crtp.CLASSES[1]()
+    assert issubclass(crtp.CLASSES[1], UdpDriver) and not driver.needs_resending
+    driver.connect("udp://127.0.0.1:9", None, None)  # a UDP socket needs no listener to open
+    try:
+        assert driver.needs_resending
+    finally:
+        driver.close()
