@@ -9,11 +9,11 @@ use std::thread;
 use std::time::Duration;
 
 use host_train::io::{
-    crtp_header, ext_pose_packet, force_to_pwm, full_state_setpoint_packet, imu_packet,
-    motor_packet, param_toc_request, param_write_float, parse_ext_pose, parse_imu, parse_motor,
-    parse_param_answer, parse_setpoint, position_setpoint_packet, pwm_to_force_n, pwm_to_rpm,
-    quat_compress, stop_setpoint_packet, CrtpSetpoint, ParamAnswer, CRTP_HANDSHAKE,
-    CRTP_PORT_PARAM,
+    crtp_header, ext_pose_packet, force_to_pwm, full_state_setpoint_packet, hl_go_to_packet,
+    hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet, param_toc_request,
+    param_write_float, parse_ext_pose, parse_imu, parse_motor, parse_param_answer, parse_setpoint,
+    position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress, stop_setpoint_packet,
+    CrtpSetpoint, ParamAnswer, CRTP_HANDSHAKE, CRTP_PORT_PARAM,
 };
 use host_train::{Plant, PlantState};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -70,6 +70,21 @@ fn packets_have_the_firmwares_byte_layouts() {
     let s = std::f64::consts::FRAC_1_SQRT_2;
     assert_eq!(quat_compress([0.0, 0.0, s, s]), (2 << 30) | 511);
     assert_eq!(stop_setpoint_packet(), vec![0x7C, 0]);
+    // High-level commander: port 8 channel 0 (0x8C), the command, group mask 0, then packed
+    // fields: take-off / land (7 / 8) height, yaw, useCurrentYaw, duration; go-to (4) relative,
+    // x y z yaw duration; stop (3).
+    let takeoff = hl_takeoff_packet(1.0, 0.5, 2.5);
+    assert_eq!(takeoff.len(), 3 + 4 + 4 + 1 + 4);
+    assert_eq!(&takeoff[..3], &[0x8C, 7, 0]);
+    assert_eq!(&takeoff[3..7], &1.0f32.to_le_bytes());
+    assert_eq!(takeoff[11], 0, "the yaw given, not the current one");
+    assert_eq!(&takeoff[12..16], &2.5f32.to_le_bytes());
+    assert_eq!(hl_land_packet(0.0, 0.0, 2.0)[1], 8);
+    let go = hl_go_to_packet(&Vector3::new(0.5, 0.0, 1.0), 0.0, 1.0);
+    assert_eq!(go.len(), 4 + 5 * 4);
+    assert_eq!(&go[..4], &[0x8C, 4, 0, 0]);
+    assert_eq!(&go[4..8], &0.5f32.to_le_bytes());
+    assert_eq!(hl_stop_packet(), vec![0x8C, 3, 0]);
     // Parameters: port 2; TOC request on channel 0 (CMD_GET_ITEM_V2, id), write on channel 2.
     assert_eq!(param_toc_request(0x0102), vec![0x2C, 2, 2, 1]);
     let w = param_write_float(197, 0.25);

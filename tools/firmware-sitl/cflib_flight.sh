@@ -13,9 +13,11 @@
 #   3. hamflight-cf log URI --out ...      logs 12 s of the hover as host-train import's CSV;
 #   4. host-train import + train            the logged flight becomes a dataset and a new blob
 #                                          (1 epoch: the point is the path, not the model);
-#   5. hamflight-cf upload URI new.hfw     in flight: written, read back, committed, reported
+#   5. a torn upload                       hamflight-cf upload killed past 30 %: nothing is checked
+#                                          or flown, the compiled-in blob flies on;
+#   6. hamflight-cf upload URI new.hfw     in flight: written, read back, committed, reported
 #                                          pending (the app swaps only on the ground);
-#   6. after the landing the app swaps the blob in: the firmware's console says so, with the
+#   7. after the landing the app swaps the blob in: the firmware's console says so, with the
 #      uploaded blob's CRC.
 # Exit 1 on the first step that fails, naming it.
 set -euo pipefail
@@ -86,12 +88,28 @@ stamp "4. import + train"
     fail "train (see $out/train.txt)"
 stamp "   $(tail -1 "$out/train.txt")"
 
-stamp "5. upload in flight"
+stamp "5. a torn upload: hamflight-cf killed a third of the way (the link lost mid-upload)"
+PYTHONUNBUFFERED=1 "$cf" upload --timeout-s 10 "$uri" "$out/new.hfw" >"$out/torn.txt" 2>&1 &
+torn_pid=$!
+for _ in $(seq 300); do
+    grep -q "upload  [3-9]0 %" "$out/torn.txt" && break
+    sleep 0.1
+done
+kill -KILL $torn_pid 2>/dev/null || true
+wait $torn_pid 2>/dev/null || true
+grep -q "upload  [3-9]0 %" "$out/torn.txt" || fail "the torn upload never got under way (see $out/torn.txt)"
+sleep 1
+if grep -q "upload of .* checked\|active blob: uploaded" "$out/flight/console.log"; then
+    fail "a torn upload was checked or flown"
+fi
+stamp "   killed at $(grep -o "upload *[0-9]* %" "$out/torn.txt" | tail -1); nothing checked, the compiled-in blob flies"
+
+stamp "6. upload in flight"
 cfx "$out/upload.txt" upload --timeout-s 10 "$uri" "$out/new.hfw" --wait-s 2 || fail "upload (see $out/upload.txt)"
 stamp "   $(tail -1 "$out/upload.txt")"
 grep -qi "pending" "$out/upload.txt" || fail "the upload in flight was not deferred (pending)"
 
-stamp "6. after the landing"
+stamp "7. after the landing"
 swapped=""
 while kill -0 $plant_pid 2>/dev/null; do
     swapped=$(grep -o "active blob: uploaded crc [0-9A-F]*" "$out/flight/console.log" || true)

@@ -6,6 +6,7 @@
 # full-state setpoints at 100 Hz and a perfect motion-capture pose at 100 Hz:
 #   - the scenarios of tools/bitcraze-loop's table (cf-hover-lag50, cf-calm-spiral,
 #     cf-paper-spiral, cf-rotor-loss, cf-hover-wind, gust-spiral);
+#   - a hover flown by the firmware's high-level commander (take-off, go-to, land, stop);
 #   - a lost radio link 5 s into a hover (setpoints and pose stop);
 #   - an estimator reset 5 s into a hover (kalman.resetEstimation = 1 over CRTP);
 # and prints a markdown table (also OUT_DIR/table.md), each flight's files in OUT_DIR/<name>/.
@@ -48,6 +49,7 @@ fly() { # name scenario [extra args]
 for s in cf-hover-lag50 cf-calm-spiral cf-paper-spiral cf-rotor-loss cf-hover-wind gust-spiral; do
     fly "$s" "$s"
 done
+fly high-level hover --pilot high-level
 fly link-loss hover --link-loss-s 5
 fly estimator-reset hover --estimator-reset-s 5
 
@@ -72,6 +74,11 @@ for s in ["cf-hover-lag50", "cf-calm-spiral", "cf-paper-spiral", "cf-rotor-loss"
     print(f"| {s} | {num(j['hold_rmse_cm'])} | {num(j['hold_max_cm'])} | "
           f"{num(j['takeoff_rmse_cm'])} / {num(j['landing_rmse_cm'])} | {j['crashed'] or 'no'} |")
 print()
+j = load("high-level")
+if j:
+    print(f"The high-level commander (take-off, go-to, land, stop, no streamed setpoint): hover RMSE "
+          f"{num(j['hold_rmse_cm'])} cm from 5 s into the hold, touch-down at {num(j['touchdown_m_s'])} m/s, "
+          f"crashed: {j['crashed'] or 'no'}.")
 j = load("link-loss")
 if j and j.get("link_loss"):
     l = j["link_loss"]

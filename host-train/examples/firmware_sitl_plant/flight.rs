@@ -13,16 +13,17 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use host_train::io::{
-    ext_pose_packet, full_state_setpoint_packet, imu_packet, param_toc_request, param_write_float,
-    param_write_u8, parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet,
-    CRTP_HANDSHAKE, CRTP_PORT_SIM,
+    ext_pose_packet, full_state_setpoint_packet, hl_go_to_packet, hl_land_packet, hl_stop_packet,
+    hl_takeoff_packet, imu_packet, param_toc_request, param_write_float, param_write_u8,
+    parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, CRTP_HANDSHAKE,
+    CRTP_PORT_SIM,
 };
 use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 use crate::crtp::{param_answer, Console, Firmware, FromFirmware};
 use crate::record::{plot, write_csv, Sample};
-use crate::{Args, SetpointKind};
+use crate::{Args, Pilot, SetpointKind};
 
 /// Smooth 0 → 1 over [0, 1] (zero velocity at both ends), with its first and second derivatives.
 fn smoothstep(u: f64) -> (f64, f64, f64) {
@@ -261,6 +262,8 @@ pub fn run() -> Result<()> {
     let mut engage_at: Option<f64> = None;
     let mut hold_started_at: Option<f64> = None;
     let mut cflib_sent = 0u64;
+    // The high-level pilot: the phase it last commanded, and how often.
+    let mut hl_phase: (&str, u32) = ("", 0);
     let mut reset_id: Option<u16> = None;
     let mut reset_sent_at: Option<f64> = None;
     let mut reset_echoed_at: Option<f64> = None;
@@ -508,7 +511,25 @@ pub fn run() -> Result<()> {
             let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(s.rot));
             let _ = sock.send_to(&ext_pose_packet(&s.p_m, &q), fw_addr);
         }
-        if setpoint_now {
+        if setpoint_now && args.pilot == Pilot::HighLevel {
+            // The high-level commander flies its own plan: each phase's command three times (a
+            // command is not acknowledged, and a repeat 10 ms later changes nothing).
+            if hl_phase.0 != phase {
+                hl_phase = (phase, 0);
+            }
+            let pk = match phase {
+                "takeoff" => Some(hl_takeoff_packet(target0.p_m.z, yaw0, args.takeoff_s)),
+                "hold" => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
+                "land" => Some(hl_land_packet(-0.05, yaw0, args.land_s)),
+                "stop" => Some(hl_stop_packet()),
+                _ => None,
+            };
+            if let (Some(pk), true) = (pk, hl_phase.1 < 3) {
+                let _ = sock.send_to(&pk, fw_addr);
+                hl_phase.1 += 1;
+            }
+        }
+        if setpoint_now && args.pilot == Pilot::Stream {
             match &setpoint {
                 Some(sp) => {
                     let pk = match args.setpoint {

@@ -95,6 +95,12 @@ struct Args {
     /// (`send_position_setpoint`: position and yaw only, no feed-forward).
     #[arg(long, value_enum, default_value_t = SetpointKind::FullState)]
     setpoint: SetpointKind,
+    /// Who flies: `stream` (cflib's streamed setpoints along the scenario's reference, `--setpoint`)
+    /// or `high-level` (the firmware's high-level commander, as cflib's `HighLevelCommander`: take-off
+    /// to p*(0)'s height, go-to p*(0), land, stop; the scenario's reference is then only the score's
+    /// yardstick: use a hover scenario).
+    #[arg(long, value_enum, default_value_t = Pilot::Stream)]
+    pilot: Pilot,
     /// Setpoints per second (cflib users stream 10–100 Hz).
     #[arg(long, default_value_t = 100.0, value_parser = positive_hz)]
     setpoint_hz: f64,
@@ -117,6 +123,15 @@ struct Args {
     /// Directory for flight.csv, flight.svg, console.log, summary.json.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,
+}
+
+/// Who sends the setpoints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Pilot {
+    /// This program streams them along the reference (generic commander).
+    Stream,
+    /// The firmware's high-level commander plans them from take-off, go-to and land commands.
+    HighLevel,
 }
 
 /// The setpoint type streamed over the generic commander.

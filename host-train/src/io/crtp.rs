@@ -161,6 +161,46 @@ pub fn full_state_setpoint_packet(
     pk
 }
 
+/// The high-level commander's port (commands on channel 0).
+pub const PORT_SETPOINT_HL: u8 = 8;
+const HL_STOP: u8 = 3;
+const HL_GO_TO: u8 = 4;
+const HL_TAKEOFF_2: u8 = 7;
+const HL_LAND_2: u8 = 8;
+
+fn hl_vertical(command: u8, height_m: f64, yaw_rad: f64, duration_s: f64) -> Vec<u8> {
+    // group mask 0 (every vehicle), height, yaw, useCurrentYaw = false, duration
+    let mut pk = vec![header(PORT_SETPOINT_HL, 0), command, 0];
+    push_f32s(&mut pk, &[height_m, yaw_rad]);
+    pk.push(0);
+    push_f32s(&mut pk, &[duration_s]);
+    pk
+}
+
+/// The high-level commander's take-off (cflib's `HighLevelCommander.takeoff`, COMMAND_TAKEOFF_2):
+/// from the current x, y to `height_m` (absolute) with yaw `yaw_rad`, in `duration_s`.
+pub fn hl_takeoff_packet(height_m: f64, yaw_rad: f64, duration_s: f64) -> Vec<u8> {
+    hl_vertical(HL_TAKEOFF_2, height_m, yaw_rad, duration_s)
+}
+
+/// The high-level commander's landing (COMMAND_LAND_2): down to `height_m` in `duration_s`.
+pub fn hl_land_packet(height_m: f64, yaw_rad: f64, duration_s: f64) -> Vec<u8> {
+    hl_vertical(HL_LAND_2, height_m, yaw_rad, duration_s)
+}
+
+/// The high-level commander's go-to (COMMAND_GO_TO, absolute): to `p_m` and `yaw_rad` in
+/// `duration_s`, on its smooth polynomial, then hover there.
+pub fn hl_go_to_packet(p_m: &Vector3<f64>, yaw_rad: f64, duration_s: f64) -> Vec<u8> {
+    let mut pk = vec![header(PORT_SETPOINT_HL, 0), HL_GO_TO, 0, 0];
+    push_f32s(&mut pk, &[p_m.x, p_m.y, p_m.z, yaw_rad, duration_s]);
+    pk
+}
+
+/// The high-level commander's stop (COMMAND_STOP): its setpoints end, the motors stop.
+pub fn hl_stop_packet() -> Vec<u8> {
+    vec![header(PORT_SETPOINT_HL, 0), HL_STOP, 0]
+}
+
 /// The stop setpoint (generic commander type 0): the motors stop.
 pub fn stop_setpoint_packet() -> Vec<u8> {
     vec![header(PORT_COMMANDER_GENERIC, 0), SETPOINT_STOP]

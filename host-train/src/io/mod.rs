@@ -21,15 +21,16 @@ pub mod usdlog;
 
 // The layer's front door: what code outside host-train/src uses, by these names.
 pub use crtp::{
-    ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header, imu_packet,
-    motor_packet, param_toc_request, param_write_float, param_write_u8, parse_ext_pose, parse_imu,
-    parse_motor, parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
+    ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header,
+    hl_go_to_packet, hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet,
+    param_toc_request, param_write_float, param_write_u8, parse_ext_pose, parse_imu, parse_motor,
+    parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
     position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress, quat_decompress,
     stop_setpoint_packet, ParamAnswer, Setpoint as CrtpSetpoint, DEG_PER_LSB as IMU_DEG_PER_LSB,
     G_PER_LSB as IMU_G_PER_LSB, HANDSHAKE as CRTP_HANDSHAKE,
     PORT_COMMANDER_GENERIC as CRTP_PORT_COMMANDER_GENERIC,
     PORT_LOCALIZATION as CRTP_PORT_LOCALIZATION, PORT_PARAM as CRTP_PORT_PARAM,
-    PORT_SIM as CRTP_PORT_SIM,
+    PORT_SETPOINT_HL as CRTP_PORT_SETPOINT_HL, PORT_SIM as CRTP_PORT_SIM,
 };
 pub use dataset::{
     load as load_dataset, load_manifest as load_dataset_manifest, realization_file,
