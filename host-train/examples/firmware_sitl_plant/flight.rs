@@ -520,7 +520,7 @@ pub fn run() -> Result<()> {
             let pk = match phase {
                 "takeoff" => Some(hl_takeoff_packet(target0.p_m.z, yaw0, args.takeoff_s)),
                 "hold" => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
-                "land" => Some(hl_land_packet(-0.05, yaw0, args.land_s)),
+                "land" => Some(hl_land_packet(0.0, yaw0, args.land_s)),
                 "stop" => Some(hl_stop_packet()),
                 _ => None,
             };
