@@ -262,6 +262,11 @@ pub fn run() -> Result<()> {
     let mut engage_at: Option<f64> = None;
     let mut hold_started_at: Option<f64> = None;
     let mut cflib_sent = 0u64;
+    // Motor packets in flight (take-off to landing): the plant time of the last new one, the
+    // largest gap between two, and how many gaps were 4 ms or more (the 500 Hz controller's
+    // output every 2 ms; the SITL power distribution sends at most one per tick and skips the rest).
+    let (mut last_motor, mut last_motor_t) = (0u64, f64::NAN);
+    let (mut motor_gap_max_s, mut motor_gaps_4ms) = (0.0f64, 0u32);
     // The high-level pilot: the phase it last commanded, and how often.
     let mut hl_phase: (&str, u32) = ("", 0);
     let mut reset_id: Option<u16> = None;
@@ -416,6 +421,16 @@ pub fn run() -> Result<()> {
         }
         if link_lost_at.is_some() && motors_off_at.is_none() && pwm == [0; 4] {
             motors_off_at = Some(t);
+        }
+        if motor_packets != last_motor {
+            if matches!(phase, "takeoff" | "hold" | "land") && last_motor_t.is_finite() {
+                let gap = t - last_motor_t;
+                motor_gap_max_s = motor_gap_max_s.max(gap);
+                if gap >= 0.0035 {
+                    motor_gaps_4ms += 1;
+                }
+            }
+            (last_motor, last_motor_t) = (motor_packets, t);
         }
         let phase = if link_lost_at.is_some() {
             "link lost"
@@ -734,6 +749,10 @@ pub fn run() -> Result<()> {
         cflib_sent,
         from_cflib_max
     );
+    println!(
+        "motor packets in flight: largest gap {:.1} ms, {motor_gaps_4ms} gaps of 4 ms or more",
+        motor_gap_max_s * 1e3
+    );
     write_csv(&args.out.join("flight.csv"), &samples)?;
     plot(&args.out.join("flight.svg"), &samples, &scenario.name)?;
     let cm = |x: f64| (x * 1e4).round() / 100.0;
@@ -767,6 +786,8 @@ pub fn run() -> Result<()> {
         "max_late_ms": max_late_ms,
         "pacing_resets": late_resets,
         "motor_packets_per_s_in_flight": engage_motor_rate,
+        "motor_gap_max_ms": motor_gap_max_s * 1e3,
+        "motor_gaps_4ms": motor_gaps_4ms,
     });
     host_train::io::write_json_atomic(&args.out.join("summary.json"), &summary)?;
     println!(
