@@ -611,21 +611,15 @@ static HF_NOINLINE void applyParams(void) {
 /* GROUND / AIRBORNE / LANDED (see the top of the file). */
 static HF_NOINLINE void updatePhase(const hf_state_t *s) {
   const bool flying = supervisorIsFlying();
-  if (phase == HF_PHASE_OFF && offWhileAirborne && flying) {
-    /* Re-engaged in flight after a stop: airborne again, over the ground it took off from; the
-     * adaptation restarts from a = 0. */
-    offWhileAirborne = false;
-    phase = HF_PHASE_AIRBORNE;
-    for (int i = 0; i < 3; i++) {
-      refP[i] = s->p_m[i];
-    }
-    refYaw = yawOfRot(s->rot);
-    hf_reset(&ctl);
-  }
   if (phase == HF_PHASE_OFF) {
+    if (offWhileAirborne && flying) {
+      /* Re-engaged in flight after a stop: airborne again, over the ground it took off from. */
+      phase = HF_PHASE_AIRBORNE;
+    } else {
+      phase = HF_PHASE_GROUND;
+      groundZ = s->p_m[2];
+    }
     offWhileAirborne = false;
-    phase = HF_PHASE_GROUND;
-    groundZ = s->p_m[2];
     for (int i = 0; i < 3; i++) {
       refP[i] = s->p_m[i];
     }
