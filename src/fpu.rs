@@ -683,8 +683,8 @@ static TANH_TABLE: [f32; 11] = [
 
 /// The hidden-layer activation, tanh, as a 9/6 odd/even rational function fitted for this
 /// project (iteratively reweighted least squares toward minimax on [0, 6.9]): |error| < 5e-6
-/// against the exact tanh for every f32 input (4.0e-6 measured on a 2·10⁵-point grid over
-/// [−10, 10]; `tests/nn.rs` checks it). Both polynomials are Horner chains of fused
+/// against the exact tanh for every f32 input (`tests/nn.rs` checks it on a dense grid over
+/// [−10, 10]). Both polynomials are Horner chains of fused
 /// multiply–adds, so on the M4F each step is one `vfma` into a constant loaded as its addend
 /// ([`affine_tanh`]'s kernels), and every target rounds the same way. The host trains with the
 /// exact tanh; the difference is far below the parity tolerance of the core/host model tests
@@ -962,8 +962,9 @@ pub fn filter_rows(
 ///   a_j ← fma(ph_j, ν, a_j);
 /// - k_j = ph_j · (1/s), P(j,c) ← fma(−k_j, ph_c, P(j,c)) for j ≤ c.
 ///
-/// On the M4F one assembly loop (about 130 instructions a row against some 240 for the
-/// compiler's code); the same sequence, and so the same bits, everywhere.
+/// On the M4F one assembly loop, about half the instructions of the compiler's code for the same
+/// sequence (docs/performance.md, "The composite law's step: three implementations"); the same
+/// sequence, and so the same bits, everywhere.
 #[inline]
 pub fn kalman_rows(
     p: &mut [[f32; 6]; 6],

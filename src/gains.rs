@@ -1,8 +1,8 @@
 //! The controller's gains and what they are derived from: [`Gains`] (feedback gains,
 //! adaptation rates, the composite law's observer, the lag compensation), [`VehicleFacts`]
 //! (mass, inertia, motor lag: what a blob tells about its vehicle) and the tuning constants
-//! [`Gains::for_vehicle`] uses. The design notes behind each value: docs/control.md and
-//! docs/adaptation.md.
+//! [`Gains::for_vehicle`] uses. The design notes behind each value: docs/crazyflie-chain.md
+//! ("How the gains are designed for the chain", "Stability margins") and docs/adaptation.md.
 
 use crate::adapt::{AdaptationLaw, AdaptationRates, CompositeGains};
 use crate::model::State;
@@ -20,8 +20,8 @@ use nalgebra::Vector3;
 ///   ([`LagCompensation`]); for the CF2X k_R = 4.3e-3 N·m/rad and k_ω = 4.2e-4 N·m·s/rad
 ///   (crazyflie-firmware's Lee controller uses 0.007 / 0.00115). The paper's k_R = 1.0 and
 ///   k_ω = 0.08, read as SI torque gains on J ≈ 1.4e-5 kg·m², are beyond what a 500 Hz loop can
-///   hold; the earlier 0.015 / 0.002 ([`Gains::for_mass_kg`]) were tuned on a perfect state and
-///   oscillate behind the Crazyflie's gyro filter and a 50–70 ms motor lag.
+///   hold; [`Gains::for_mass_kg`]'s 0.015 / 0.002, tuned on a perfect state, oscillate behind
+///   the Crazyflie's gyro filter and a 50–70 ms motor lag (docs/crazyflie-chain.md).
 /// - Adaptation rates act on feature units: with features scaled so that a reads as m/s² (force)
 ///   and 1e-3 N·m (torque), m c_p ≈ 22 /s² and m c_v ≈ 14 /s keep the third-order translational
 ///   error loop (s³ + 8s² + (16 + m c_v)s + m c_p) well damped.
@@ -129,13 +129,12 @@ pub const ACCEL_DELAY_S: f32 = 0.0095;
 
 /// The composite law's torque process noise Q under [`Gains::for_vehicle`] ((1e-3 N·m)² per
 /// second). The prediction term is a disturbance observer on the torque rows: its bandwidth,
-/// about √(q h² / (r dt)), adds loop gain and lag at the attitude crossover. Measured with the
-/// chain and a 70 ms lag (docs/crazyflie-chain.md): the earlier tuning (Q = 1, the tracking
-/// term's torque rates, a 10 ms low-pass on both sides, no sensor lag in the prediction) left
-/// the attitude loop 35°: the observer took 13°, the tracking term's torque rates 8°. With
-/// [`COMPOSITE_TORQUE_RATE_SCALE`], [`COMPOSITE_GYRO_LAG_S`] and
-/// [`COMPOSITE_TORQUE_FILTER_S`], Q = 0.5 leaves 45.3°. The cost is a slower answer to a torque
-/// step: rotor-loss-mid recovers in 1.26 s instead of 0.73 s (the gradient law: 2.88 s).
+/// about √(q h² / (r dt)), adds loop gain and lag at the attitude crossover. Q is set, with
+/// [`COMPOSITE_TORQUE_RATE_SCALE`], [`COMPOSITE_GYRO_LAG_S`] and [`COMPOSITE_TORQUE_FILTER_S`],
+/// so that the attitude loop keeps 45° of phase margin behind the Crazyflie's chain and a 70 ms
+/// lag. The cost is a slower answer to a torque step, which the change detector
+/// ([`COMPOSITE_FAULT_INNOVATION`]) buys back. The margin of each change and the cost:
+/// docs/crazyflie-chain.md, "The composite law's torque observer, designed for the loop".
 pub const COMPOSITE_Q_TORQUE: f32 = 0.5;
 
 /// The share of the (already scaled) torque rates c_R, c_ω the composite law's tracking term
@@ -145,39 +144,39 @@ pub const COMPOSITE_TORQUE_RATE_SCALE: f32 = 0.0;
 
 /// The lag (s) of the composite law's torque prediction behind the motors. The gyro's 2-pole
 /// 80 Hz low-pass (2.8 ms), one sample of delay (1 ms), half a 500 Hz tick of hold (1 ms) and
-/// the half tick of the rate difference (1 ms) make 5.8 ms; the margin keeps growing past it
-/// (with Q = 0.8 and no low-pass: 41.6° with none, 44.1° at 6 ms, 45.4° at 8 ms, 46.9° at
-/// 11 ms: the prediction's excess lag feeds a share of the command's rate into ε, a lead in
-/// the observer's loop). 11 ms is chosen.
+/// the half tick of the rate difference (1 ms) make 5.8 ms. The attitude loop's margin keeps
+/// growing past it (the prediction's excess lag feeds a share of the command's rate into ε, a
+/// lead in the observer's loop), hence the longer lag; the margin per lag is in
+/// docs/crazyflie-chain.md ("The composite law's torque observer, designed for the loop").
 pub const COMPOSITE_GYRO_LAG_S: f32 = 0.011;
 
 /// The composite law's low-pass on its torque rows under [`Gains::for_vehicle`] (s). Each ms
 /// of it costs the attitude loop about 0.4° of margin, but without it a badly trained model
-/// (2 epochs on 8 s of hover) saturates the mixer on 90 % of ticks and crashes on hover-wind:
-/// the model's error closes a loop through the unfiltered observer near the Nyquist rate.
-/// 3 ms and 5 ms both fly it (0.32 % and 0.20 % saturated).
+/// (2 epochs on 8 s of hover) saturates the mixer and crashes on hover-wind: the model's error
+/// closes a loop through the unfiltered observer near the Nyquist rate (docs/crazyflie-chain.md,
+/// "The composite law's torque observer, designed for the loop").
 pub const COMPOSITE_TORQUE_FILTER_S: f32 = 0.005;
 
 /// The composite law's change detector under [`Gains::for_vehicle`]
 /// ([`CompositeGains::fault_innovation`], 1e-3 N·m RMS of the torque rows' prediction error,
-/// low-passed over 20 ms). Without a fault the error stays below 0.3 on every scenario of
-/// `scenarios/` but a setpoint step's first ticks (docs/adaptation.md, "Rotor loss"); the
-/// margin measurement's injection makes 0.2; a rotor losing 40 % of its thrust crosses 0.35
-/// within 30 ms. After it, [`CompositeGains::fault_q_torque`] for
-/// [`CompositeGains::fault_boost_s`].
+/// low-passed over 20 ms). Set above what small signals make (the flight error of every
+/// scenario without a fault but a setpoint step's first ticks, the margin measurement's
+/// injection) and below what a rotor losing 40 % of its thrust makes within 30 ms
+/// (docs/adaptation.md, "Rotor loss: saturation, frozen estimates and the change detector").
+/// After it, [`CompositeGains::fault_q_torque`] for [`CompositeGains::fault_boost_s`].
 pub const COMPOSITE_FAULT_INNOVATION: f32 = 0.35;
 
 /// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
-/// position loop (4 rad/s), fast against a changing wind; measured flat from 0.1 to 1 s.
+/// position loop (4 rad/s), fast against a changing wind; the result is flat across that range
+/// (docs/crazyflie-chain.md, "How the gains are designed for the chain").
 pub const VELOCITY_CONSISTENCY_TAU_S: f32 = 0.3;
 
 /// The share of the perfect-state torque adaptation rates (c_R = 20,000, c_ω = 2,000) that
 /// [`Gains::for_vehicle`] keeps. The adaptation's torque channel closes a second loop around the
-/// attitude crossover. At the full rates the gradient law leaves 44° of the attitude loop's 54°
-/// phase margin with the Crazyflie's sensor chain and a 50–70 ms motor lag; at 0.8 it leaves
-/// 46°, so the loop keeps 45° with adaptation on. The cost is a slower answer to a torque
-/// disturbance: rotor-loss-mid 1.81 → 1.99 cm. Lower c_ω alone buys more margin but less damping
-/// of the adaptation loop, and hover attitude σ grows past 0.2°.
+/// attitude crossover; at this share the gradient law leaves the attitude loop 45° of phase
+/// margin with the Crazyflie's sensor chain and a 50–70 ms motor lag, at the cost of a slower
+/// answer to a torque disturbance. Lowering c_ω alone buys more margin but less damping of the
+/// adaptation loop. The margins and costs: docs/crazyflie-chain.md, "Stability margins".
 pub const TORQUE_ADAPTATION_SCALE: f32 = 0.8;
 
 /// [`AdaptationRates::saturated_drive_m`] of the tuned gains (m): while the mixer saturates the

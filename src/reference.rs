@@ -159,8 +159,8 @@ pub fn desired_attitude(
 /// gives NaN.
 ///
 /// It replaces `libm`'s `sinf`/`cosf`, whose Payne–Hanek reduction and double-precision kernels
-/// are software f64 on the single-precision M4F: about 300 instructions a call and 9.5 KB of
-/// flash.
+/// are software f64 on the single-precision M4F: slow, and large in flash (docs/performance.md,
+/// "Where the step goes").
 pub fn sin_cos(x: f32) -> (f32, f32) {
     const TWO_OVER_PI: f32 = core::f32::consts::FRAC_2_PI;
     const PIO2_HI: f32 = 1.570_312_5;

@@ -28,8 +28,8 @@ pub const MAX_MASS_KG: f32 = 5.0;
 /// Gravitational acceleration (m/s²), as in the SITL plant and gym-pybullet-drones.
 pub const GRAVITY_M_S2: f32 = 9.8;
 /// The motors' first-order time constant (s) assumed for a model that does not carry its own
-/// (the nominal model, and weight blobs written before the lag was data): the lag the composite
-/// law's prediction assumed before it came from the vehicle.
+/// (the nominal model, and weight blobs of the format versions without the lag): such a model is
+/// flown with this lag assumed.
 pub const DEFAULT_MOTOR_TAU_S: f32 = 0.05;
 /// The largest motor time constant a weight blob may carry (s): a first-order lag longer than
 /// this is no quadrotor's motor (a Crazyflie's is 20–70 ms).
@@ -148,7 +148,7 @@ pub const GAIN_OUT: usize = 24;
 /// Inputs of the disturbance-feature network: the rows of R. The paper's W(q, 𝔭) also sees the
 /// momentum; the disturbances this model is trained on (wind, weak rotors) do not depend on it,
 /// and with velocity inputs the network fitted spurious velocity dependence that cost the adaptive
-/// controller 3× in tracking on paper-spiral (0.074 cm against 0.022 cm).
+/// controller 3× in tracking on paper-spiral (docs/math.md, "Difference from the paper").
 pub const DIST_IN: usize = 9;
 /// Outputs of the disturbance-feature network: W ∈ ℝ⁶ˣᵖ, row-major.
 pub const DIST_OUT: usize = 6 * FEATURES;

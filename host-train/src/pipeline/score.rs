@@ -21,8 +21,8 @@
 //! velocities integrate to (trapezoid, from the window's first position), against the logged
 //! position. It reads the future velocities, so it is not a predictor: it measures how well the
 //! log's velocity and position agree, an error a predictor that starts from the logged
-//! velocity will hardly beat (the nano-drone benchmark's melon flights: 0.037 m at 50 steps,
-//! 40 % of the best predictor's; docs/benchmark.md).
+//! velocity will hardly beat (on the nano-drone benchmark's melon flights a large share of the
+//! best predictor's error: docs/benchmark.md).
 //!
 //! For each predicted step k = 1 … N it reports the mean (MAE) and the root mean square (RMSE)
 //! over windows of the error norms: position ‖p̂ − p‖ (m), velocity ‖R̂ v̂ − R v‖ (world frame,

@@ -164,10 +164,10 @@ impl Trainer<'_> {
     /// [`Trainer::fused`] is off or the benchmark's reference is asked for. By burn, a large
     /// minibatch is split into one shard per core, each with its own autodiff graph (the flex
     /// backend runs an op on one core), and the shards' gradients are averaged, weighted by
-    /// their sizes: the whole batch's gradient, to rounding. Measured with `host-train
-    /// bench-train` on 2 cores: 1.15 → 0.84 s per epoch at batch 128, 0.93 → 0.58 at 256,
-    /// 0.76 → 0.39 at 7,776. (On a machine whose other core is busy the shards wait on each
-    /// other and on the autodiff registry's lock, and it is slower at small batches.)
+    /// their sizes: the whole batch's gradient, to rounding. Faster at every batch size under
+    /// `host-train bench-train` on 2 cores (docs/performance.md, "Training speed"). (On a
+    /// machine whose other core is busy the shards wait on each other and on the autodiff
+    /// registry's lock, and it is slower at small batches.)
     fn loss_and_grads(&self, ids: &[usize]) -> Shard {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         if self.fused && !self.reference {

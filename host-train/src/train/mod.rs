@@ -116,8 +116,7 @@ impl GradientPath {
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainConfig {
     /// Epochs over the training windows (default 10, then [`TrainConfig::feature_epochs`]
-    /// of the feature stage: 22 in all, about 24 s on 2 cores with burn's autodiff;
-    /// docs/training.md).
+    /// of the feature stage: 22 in all; docs/training.md).
     pub epochs: usize,
     /// Adam's peak learning rate (default 3e-3), reached after the warm-up and decayed by a
     /// cosine to 1/20 of it.
@@ -141,7 +140,7 @@ pub struct TrainConfig {
     /// each Adam step those weights shrink by lr·λ. Without it the features learn to vary
     /// steeply with attitude — under each realization's wind the vehicle hovers at its own tilt,
     /// so tilt can stand in for a_j — and the adaptation law then chases the features
-    /// (paper-spiral: 0.49 cm with λ = 0).
+    /// (docs/training.md, "Choosing the schedule").
     pub feature_decay: f64,
     /// Epochs of linear learning-rate warm-up before the cosine decay (default 1).
     pub warmup_epochs: usize,
@@ -164,8 +163,8 @@ pub struct TrainConfig {
     /// flight's weak rotors or sagging battery scale its own commands and not the shared g.
     pub flight_rotor_gains: bool,
     /// With `flight_rotor_gains`: epochs of the feature stage after training (J⁻¹ and g
-    /// frozen, the rotor gains dropped, W and the a_j trained alone; default 12: paper-spiral
-    /// `adaptive` 0.046 cm after 3, 0.032 after 6, 0.022 after 12; docs/training.md).
+    /// frozen, the rotor gains dropped, W and the a_j trained alone; default 12, chosen in
+    /// docs/training.md, "Choosing the schedule").
     pub feature_epochs: usize,
     /// Fly the new blob in the SITL before writing it, and refuse to write one that crashes the
     /// adaptive controller ([`crate::pipeline::train`]; default true).

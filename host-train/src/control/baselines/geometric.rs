@@ -63,8 +63,9 @@ impl GeometricGains {
 /// 80 rad/s, has no phase margin left and the vehicle rolls over within 2 s.
 pub const GEOMETRIC_MAX_UNCOMPENSATED_LAG_S: f64 = 0.03;
 
-/// The lag (s) [`Geometric::with_motor_lag`] makes slower motors look like: led to 30 ms, the
-/// light vehicle still crashes a logging flight (circle-calm at 0.80 s); to 20 ms all fly.
+/// The lag (s) [`Geometric::with_motor_lag`] makes slower motors look like: led only to 30 ms,
+/// the light vehicle still crashes a logging flight; to 20 ms all fly (docs/vehicles.md, "Three
+/// vehicles").
 pub const GEOMETRIC_LAG_TARGET_S: f64 = 0.02;
 
 /// The geometric controller.

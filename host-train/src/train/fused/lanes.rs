@@ -106,8 +106,8 @@ pub(super) fn tanh_f32(a: f32) -> f32 {
 }
 
 /// `[f(0), …, f(N − 1)]`, always inlined: std's `array::from_fn` and `map` may be left as calls,
-/// and a called function is compiled without the kernel's target features (measured: 9 % of
-/// an epoch at batch 128 went to such a call).
+/// and a called function is compiled without the kernel's target features (such a call can take
+/// a visible share of an epoch: docs/performance.md, "Training speed").
 #[inline(always)]
 pub(super) fn vs<const N: usize>(f: impl Fn(usize) -> V) -> [V; N] {
     let mut o = [V::ZERO; N];

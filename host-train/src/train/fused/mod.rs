@@ -176,9 +176,9 @@ pub fn loss_and_grads_on(
 
 /// [`group`] compiled for the best vector extension the CPU has: AVX-512VL (32 vector
 /// registers) or AVX2 (a lane group then fills one 256-bit register), or the baseline target
-/// (SSE2: two registers). Measured with `host-train bench-train --batch 0` on this machine:
-/// 0.199 s per epoch baseline, 0.179 AVX2, 0.137 AVX2 with AVX-512VL; explicit FMA (`f32::mul_add`) was
-/// slower (0.098 against 0.082 back to back), so the lanes multiply and add apart.
+/// (SSE2: two registers), each faster than the one before it under `host-train bench-train`.
+/// Explicit FMA (`f32::mul_add`) was slower there, so the lanes multiply and add apart
+/// (docs/performance.md, "Training speed", has the figures).
 fn group_dispatch(
     k: &K,
     n: &Nets,

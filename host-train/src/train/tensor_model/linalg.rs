@@ -6,9 +6,9 @@ use super::Consts;
 
 /// Batch size from which the products of small matrices below are broadcast multiplies and
 /// sums instead of batched matmuls: the flex backend runs a batched matmul as one gemm call
-/// per matrix, a fixed cost per window, while the broadcast form takes two more ops. Measured
-/// with `host-train bench-train`: full batch (shards of 3,888) 0.345 → 0.269 s per epoch,
-/// batch 128 (shards of 64) 0.79 → 0.95 s.
+/// per matrix, a fixed cost per window, while the broadcast form takes two more ops: it pays off
+/// on large shards and costs on small ones (`host-train bench-train`; docs/performance.md,
+/// "Training speed").
 const BROADCAST_MIN_BATCH: usize = 1024;
 
 /// M[B,r,k] x[B,k] → [B,r].
