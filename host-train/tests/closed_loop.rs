@@ -1,7 +1,8 @@
 //! The core flown against the SITL plant, closed loop: every controller tracks without
 //! disturbance, the adaptive controller holds paper-spiral with the shipped weights, and the
-//! adaptation converges to the true disturbance. Thresholds sit near 3× the values measured when
-//! they were set (noted as `measured`), so that a regression shows.
+//! adaptation converges to the true disturbance. Thresholds sit near 3× what the flights gave
+//! when they were set, so that a regression shows (today's figures: docs/adaptation.md and
+//! docs/crazyflie-chain.md).
 //!
 //! Run in release (`cargo test --release`): each flight is 15–30 simulated seconds at 500 Hz.
 
@@ -39,11 +40,12 @@ const ALL: [&str; 6] = [
     "adaptive",
 ];
 
-/// Largest whole-flight RMSE (m) per controller on hover and circle-slow: 3× the measured.
+/// Largest whole-flight RMSE (m) per controller on hover and circle-slow: about 3× what each
+/// flew when the bars were set.
 fn tracking_bar(name: &str, sc_name: &str) -> f64 {
-    // measured (cm) hover / circle-slow: pid 0.0 / 0.47, geometric 0.0 / 0.33,
-    // ida-pbc 0.0 / 0.29, geometric-adaptive 0.0 / 0.31, learned 1.32 / 1.37,
-    // adaptive 0.19 / 0.34 (the start-up transient of a from 0 on the learned model's bias).
+    // The nominal-model controllers hold hover exactly; `learned` carries its model's bias
+    // without adaptation, and `adaptive` has the start-up transient of a from 0 on that bias,
+    // hence their looser bars.
     let cm = match (name, sc_name) {
         ("learned", _) => 4.1,
         ("adaptive", "hover") => 0.57,
@@ -79,11 +81,11 @@ fn adaptive_holds_paper_spiral_and_beats_learned_eightyfold() {
     let learned = fly("learned", &sc);
     let a = adaptive.rmse_pos_window_m.expect("window scored");
     assert!(!adaptive.crashed, "adaptive crashed: {adaptive:?}");
-    // measured 0.0383 cm (the composite law, `adaptive-composite`: see docs/adaptation.md).
+    // `adaptive` flies the composite law (docs/adaptation.md); bar 0.1 cm.
     assert!(a <= 0.001, "adaptive window RMSE {a:.6} m > 0.1 cm");
     assert!(!learned.crashed, "learned crashed: {learned:?}");
     let l = learned.rmse_pos_window_m.expect("window scored");
-    // measured: learned 9.32 cm, 243× worse.
+    // Without adaptation the learned model alone must be at least 80× worse.
     assert!(
         80.0 * a <= l,
         "adaptive {a:.6} m is not 80x better than learned {l:.5} m"
@@ -103,7 +105,8 @@ fn adaptive_beats_geometric_adaptive_with_the_paper_law() {
             a.rmse_pos_window_m.expect("scored"),
             g.rmse_pos_window_m.expect("scored"),
         );
-        // measured: paper-spiral 0.0383 vs 0.0587 cm (1.53×); realistic 0.183 vs 0.200 (1.09×).
+        // The learned features win by `margin`: a clear factor on paper-spiral, a small one on
+        // the realistic plant, whose noise and unmodelled effects both models share.
         assert!(
             margin * a <= g,
             "{sc_name}: adaptive {a:.6} m vs geometric-adaptive {g:.6} m"
@@ -119,7 +122,7 @@ fn crashes_are_reported_not_silent() {
         let r = fly(name, &sc);
         let flew_whole = (r.duration_s - r.planned_duration_s).abs() < 1e-6;
         if name == "pid" {
-            // measured: crashes at 0.53 s, rolled over into the ground (z < 0).
+            // It crashes well inside the first 1.5 s, and the flight stops there.
             let t = r.crash_time_s.expect("the DSL PID crashes on paper-spiral");
             assert!(r.crashed && t < 1.5, "pid: {r:?}");
             assert!(
@@ -188,7 +191,7 @@ fn adaptation_converges_to_a_constant_wind() {
     let f_nominal = compensated_world_force(&sc, &mut nominal, 5.0);
     let rel = (f_nominal - truth).norm() / truth.norm();
     println!("geometric-adaptive: {:.3} % off", 100.0 * rel);
-    // measured 0.45 %.
+    // The nominal features are the true ones: the estimate's force matches the wind closely.
     assert!(
         rel < REL_NOMINAL,
         "geometric-adaptive: compensated force {f_nominal:?} N vs wind force {truth:?} N ({:.1} % off)",
@@ -196,7 +199,8 @@ fn adaptation_converges_to_a_constant_wind() {
     );
 
     // Whatever thrust deficit the learned g still carries (g_f, the learned thrust gain at
-    // hover: 0.997 with the calm realization in the training data, 0.980 without), the
+    // hover: near 1 with the calm realization in the training data, lower without; see
+    // docs/training.md, "Calm air"), the
     // estimate also holds an upward force that cancels it on a vehicle with nominal rotors:
     // (1 − g_f) m g. The wind itself is the horizontal part.
     let f_learned = compensated_world_force(&sc, &mut learned, 5.0);
@@ -205,7 +209,7 @@ fn adaptation_converges_to_a_constant_wind() {
     let expected = nalgebra::Vector3::new(truth.x, truth.y, (1.0 - g_f) * 0.027 * 9.8);
     let rel = (f_learned - expected).norm() / truth.norm();
     println!("adaptive: {:.3} % off", 100.0 * rel);
-    // measured 0.75 % (2.6 % with the weights trained without a calm realization).
+    // A blob trained without a calm realization would carry a larger g bias and fail this.
     assert!(
         rel < REL_LEARNED,
         "adaptive: compensated force {f_learned:?} N vs wind force + g bias {expected:?} N \
@@ -222,7 +226,7 @@ fn adaptive_holds_paper_spiral_on_a_less_ideal_plant() {
     let r = fly("adaptive", &sc);
     assert!(!r.crashed, "{r:?}");
     let e = r.rmse_pos_window_m.expect("window scored");
-    // measured 0.183 cm (the composite law: see docs/adaptation.md).
+    // `adaptive` flies the composite law (docs/adaptation.md); bar 0.55 cm.
     assert!(e < 0.0055, "adaptive on the realistic plant: {e:.5} m");
 }
 

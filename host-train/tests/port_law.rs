@@ -1,8 +1,9 @@
 //! The law flies what the model learned: on a plant whose rotors act weakly and late, with drag,
 //! rate damping and a pull toward level (the kind of vehicle the nano-drone benchmark's flights
 //! show, `scenarios/bl-real-*.toml`), a blob that carries those port terms tracks the spiral at
-//! least 5× better than the untrained prior under both laws, and never crashes (measured:
-//! 0.018 against 18.6 cm with the gradient law, 0.072 against 38.5 cm with the composite one). The plant's residual is
+//! least 5× better than the untrained prior under both laws, and never crashes (the benchmark
+//! vehicle's figures: docs/benchmark.md, "The flight check flies a plant that is not the
+//! model"). The plant's residual is
 //! linear in the tilt where the model's potential is not, and it acts on rotor speeds behind a
 //! motor lag: the plant is not the model.
 

@@ -43,7 +43,8 @@ fn short_training_on_collected_data_lowers_heldout_loss() {
             .true_rotor_efficiency
             .expect("collect records the rotors");
         eprintln!("flight {j}: rotor efficiency learned {learned:?}, true {truth:?}");
-        // Measured on this short run: within 0.015 (the full default run: 7e-4).
+        // A loose bar for this short run; the full default run matches far closer
+        // (docs/training.md, "Calm air").
         for (l, t) in learned.iter().zip(truth) {
             assert!(
                 (l - t).abs() < 0.03,

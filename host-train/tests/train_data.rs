@@ -36,7 +36,8 @@ fn each_step_is_integrated_with_its_own_command() {
         last(&exact.rate_rad_s),
         last(&wrong.rate_rad_s)
     );
-    // Measured: 0 (bit-exact, the data are the same RK4) and 4.1e-2 rad/s.
+    // The per-step commands reproduce the data (the same RK4, to rounding); holding the first
+    // command instead leaves a clear rate error, so the test sees which command is used.
     assert!(last(&exact.rate_rad_s) < 1e-6, "{exact:?}");
     assert!(last(&wrong.rate_rad_s) > 1.5e-2, "{wrong:?}");
     assert!(!w.realizations[0].disturbance_free);

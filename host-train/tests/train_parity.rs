@@ -420,8 +420,10 @@ fn fused_kernel_gradients_equal_burns() {
                 (l_fused - l_burn).abs() / l_burn
             );
             assert!(l_burn.is_finite() && l_burn > 0.0, "{tag}: loss {l_burn}");
-            // Measured: loss within 2.5e-7 of burn's, gradients within 1e-6 (rounding; without
-            // the VJP's second-order term the J⁻¹ head's were 6 % off).
+            // The two differ by rounding only: the loss within 1e-6 relative of burn's, each
+            // gradient within the bar below. A term missing from the hand-written adjoint (the
+            // VJP's second-order one, say) puts a head's gradient percents off and fails here
+            // (docs/performance.md, "Training speed").
             assert!(
                 (l_fused - l_burn).abs() <= 1e-6 * l_burn,
                 "{tag}: loss {l_fused} vs {l_burn}"

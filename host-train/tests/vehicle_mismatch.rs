@@ -237,8 +237,9 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
         assert!(nominal_true[3] < s.heldout_nominal_stock[3]);
     }
 
-    // Motor dynamics: with the realized command J stays physical (measured 0.95–1.4× the true
-    // J_x, J_y over three seeds); the commanded one inflates it (5.6–6×).
+    // Motor dynamics: with the realized command J_x, J_y stay physical (within 0.6–1.8× of the
+    // truth); trained on the commanded one, the model takes the lag up as a J more than 3× too
+    // large (docs/vehicles.md has each seed's J).
     let j_true = r.vehicle.inertia_kg_m2;
     for s in &lagged {
         for (k, (j, jt)) in s
@@ -300,12 +301,12 @@ fn learned_model_knows_the_vehicle_the_nominal_model_does_not() {
     }
 
     // Under the composite law, learned reaches the floor: within 5 % of the nominal model told
-    // the true mass, inertia and motor lag, on both spirals (full-size study: 0.99–1.00×). The
-    // scenarios' measurement noise sets that floor (docs/vehicles.md, "What sets the floor").
+    // the true mass, inertia and motor lag, on both spirals. The scenarios' measurement noise
+    // sets that floor (docs/vehicles.md, "What sets the floor").
     assert_floor(&r, "heavy", &r.scenarios[..2]);
 
     // Without the noise the learning shows: learned + composite ≤ 0.7× nominal + composite with
-    // the stock constants on the calm spiral (full-size study: 0.56×).
+    // the stock constants on the calm spiral (the full-size study's ratio: docs/vehicles.md).
     let mut clean = scenario("mismatch-calm-spiral");
     clean.spec.effects.noise = Default::default();
     let fly = |key: &str, blob: Option<&Path>| {
@@ -429,13 +430,13 @@ fn import_records_the_vehicle_and_checks_its_flags() {
 /// study's full size (about 5 s each): the logging flights fly (the light one only with the
 /// logging Lee's lag lead: uncompensated it rolls over), the blob passes the flight check, no
 /// adaptive flight crashes, and learned + composite ≤ nominal + composite on every scenario
-/// (seed 0 on main e9d21b8: 0.86–0.95×; asym's rotor loss with seed 2 is 1.003×).
+/// (the ratios: docs/vehicles.md, "Status of the three-vehicle bars").
 #[test]
 fn light_and_asym_vehicles_learn_and_fly_both_laws() {
     use host_train::control::Geometric;
     for vehicle in ["light", "asym"] {
         let out = tmpdir(vehicle);
-        // Every asym seed: its rotor loss was where a learned split of J and g cost most.
+        // Every asym seed: its rotor loss is where a learned split of J and g costs most.
         let seeds = if vehicle == "asym" { 3 } else { 1 };
         let args = VehicleStudyArgs {
             seeds,

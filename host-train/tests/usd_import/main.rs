@@ -333,10 +333,9 @@ fn disturbance_free_flights_train_with_a_pinned_to_zero() {
     a.logs = vec![dir.join("windy.bin")];
     a.calm = vec![dir.join("calm.bin")];
     run_import(&a).unwrap();
-    // Two epochs on 4 s of hover identify no inertia (J comes out 2.7–3.6× the stock one):
-    // the flight check may refuse to fly such a model (with the per-axis attitude
-    // gains its gradient law crashes on the rotor loss at 6.2 s), and this test is about the
-    // calm flight's a, not about flying.
+    // Two epochs on 4 s of hover identify no inertia (J comes out several times the stock
+    // one): the flight check may refuse to fly such a model (its gradient law can crash on the
+    // rotor loss), and this test is about the calm flight's a, not about flying.
     let cfg = host_train::train::TrainConfig {
         epochs: 2,
         batch: 64,
