@@ -201,8 +201,8 @@ fn version_1_blob_is_migrated_to_the_stock_mass() {
     );
 }
 
-/// A version-2 blob (the mass, no motor lag) loads with its mass and the default lag, the one
-/// the composite law assumed for every model before the lag was data.
+/// A version-2 blob (the mass, no motor lag) loads with its mass and the default lag
+/// (`DEFAULT_MOTOR_TAU_S`, what a model that carries no lag is flown with).
 #[test]
 fn version_2_blob_is_migrated_to_the_default_motor_lag() {
     let w = ModelWeights {

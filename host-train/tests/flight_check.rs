@@ -72,8 +72,8 @@ fn a_blob_that_crashes_is_refused_with_a_reason() {
 const SCALE: f32 = 3.0;
 
 /// Features far from any the rates were tuned for (the wind columns also carrying a large body
-/// torque) no longer crash the adaptive controller, thanks to the normalized gradient: the
-/// check passes them as "not worse than without adaptation".
+/// torque) do not crash the adaptive controller, thanks to the normalized gradient: the check
+/// passes them as "not worse than without adaptation".
 #[test]
 fn torque_coupled_features_fly_no_worse_than_without_adaptation() {
     use hamflight::model::FEATURES;

@@ -93,8 +93,7 @@ pub struct FitResponseArgs {
     #[arg(long, value_enum, default_value_t = ForceTerms::Drag)]
     pub force_terms: ForceTerms,
     /// Leave out the angular acceleration linear in the tilt (the vehicle's own attitude
-    /// loop's pull toward level; on the nano-drone benchmark it takes melon's position at 50
-    /// steps from 0.102 to 0.093 m).
+    /// loop's pull toward level; what it buys on the nano-drone benchmark: docs/benchmark.md).
     #[arg(long)]
     pub no_tilt: bool,
     /// Output: the response as JSON.

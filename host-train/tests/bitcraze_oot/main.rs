@@ -513,10 +513,9 @@ fn c_path_matches_native_with(
         );
     }
     // The two paths differ only by f32 rounding of the conversions (quaternion, deg/s, world
-    // velocity, the accelerometer in G): 5.5e-8 m (gradient law) and 8.1e-8 m (composite)
-    // measured. A path that hands Bitcraze's power distribution the law's wrench instead of the
-    // command (`Output::command`, with the motor-lag lead) drifts by millimetres: fail well
-    // before that.
+    // velocity, the accelerometer in G), far below the 10 µm bar. A path that hands Bitcraze's
+    // power distribution the law's wrench instead of the command (`Output::command`, with the
+    // motor-lag lead) drifts by millimetres: fail well before that.
     assert!(
         max_diff_m < 1e-5,
         "C path drifts {max_diff_m} m from native"
