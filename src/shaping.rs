@@ -4,9 +4,9 @@
 //! **Why (windup).** The adaptation law (paper eq. `geometric_adaptive_law`) integrates
 //! the tracking errors whatever their cause. A setpoint that jumps 0.5 m makes e_p ≈ 0.5 m for a
 //! second; the law reads that as a disturbance and winds a up, and unwinding takes seconds
-//! (the `step` scenario's figures with and without shaping: docs/adaptation.md). Clipping and freezing the law's
-//! drive only halved it (see [`crate::adapt`]), because the tail of every transient still looks
-//! like a disturbance. Model-reference adaptive control answers this at the source: the closed
+//! (the `step` scenario's figures with and without shaping: docs/adaptation.md). Clipping and
+//! freezing the law's drive only halved it (see [`crate::adapt`]), because the tail of every
+//! transient still looks like a disturbance. Model-reference adaptive control answers this at the source: the closed
 //! loop is asked to follow a reference model, a motion it can actually fly, and the tracking
 //! errors that remain are evidence about the model.
 //!

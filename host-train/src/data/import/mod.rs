@@ -46,9 +46,9 @@
 //!
 //! The log holds the *commanded* wrench; with motor lag the rotors realize it only after a
 //! delay, and a model trained on the commanded wrench takes up the lag elsewhere (on the heavy
-//! vehicle of docs/vehicles.md it learned a J several times too large). With `--motor-tau-s T` the importer
-//! turns each logged command into the realized one the trainer integrates. The log has no motor
-//! outputs, so the wrench is taken apart per rotor through the mixer inverse of `--vehicle`
+//! vehicle of docs/vehicles.md it learned a J several times too large). With `--motor-tau-s T`
+//! the importer turns each logged command into the realized one the trainer integrates. The log
+//! has no motor outputs, so the wrench is taken apart per rotor through the mixer inverse of `--vehicle`
 //! (else the CF2X's) into squared rotor speeds ωᵢ² (as
 //! [`crate::sim::plant::VehicleParams::wrench_to_rpm_squared`]), each rotor speed follows
 //! the commanded one through the first-order lag ω̇ᵢ = (ωᵢ,cmd − ωᵢ)/T from sample to sample
