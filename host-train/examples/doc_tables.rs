@@ -16,6 +16,11 @@
 //!
 //! Every NAME on a page must be one this program knows, and every block it knows must be on a
 //! page: a missing or unknown block is an error too.
+//!
+//! The `firmware-budget` block is the firmware's cost on the STM32F405, from
+//! `firmware/report.sh` under QEMU (instruction counts are exact with `-icount shift=0`); it needs
+//! `qemu-system-arm` and the thumbv7em target. Without QEMU the block is left as the page has it,
+//! with a warning, except under CI (`CI=true`), where that is an error.
 
 use hamflight::{Gains, VehicleFacts};
 use host_train::control::{by_name, load_learned, Controller, CoreController, DEFAULT_WEIGHTS};
@@ -26,7 +31,23 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The pages that may hold generated blocks.
-const PAGES: [&str; 3] = ["README.md", "docs/adaptation.md", "docs/crazyflie-chain.md"];
+const PAGES: [&str; 4] = [
+    "README.md",
+    "docs/adaptation.md",
+    "docs/crazyflie-chain.md",
+    "docs/firmware.md",
+];
+
+/// The firmware builds of the budget table: label, `FEATURES`, `NO_DEFAULT`.
+const BUDGET_BUILDS: [(&str, &str, bool); 3] = [
+    ("composite law, 500 Hz (the default image)", "", false),
+    (
+        "composite law, 1 kHz (`FEATURES=loop-1khz`)",
+        "loop-1khz",
+        false,
+    ),
+    ("the paper's gradient law (`NO_DEFAULT=1`)", "", true),
+];
 
 /// The scenarios of the per-law table: each exercises the estimator.
 const LAW_SCENARIOS: [&str; 6] = [
@@ -271,9 +292,103 @@ fn paper_spiral_table() -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// Every block this program writes, by name.
+/// `n` with a comma every three digits, as the pages write numbers.
+fn thousands(n: u64) -> String {
+    let d = n.to_string();
+    let mut out = String::new();
+    for (i, c) in d.chars().enumerate() {
+        if i > 0 && (d.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// One `firmware/report.sh` run (`CYCLES=0`): its key=value figures.
+fn firmware_report(features: &str, no_default: bool) -> anyhow::Result<BTreeMap<String, u64>> {
+    let kv = std::env::temp_dir().join(format!(
+        "hamflight-doc-budget-{}-{features}-{no_default}.txt",
+        std::process::id()
+    ));
+    let out = std::process::Command::new(root().join("firmware/report.sh"))
+        .env("CYCLES", "0")
+        .env("FEATURES", features)
+        .env("NO_DEFAULT", if no_default { "1" } else { "0" })
+        .env("REPORT_KV", &kv)
+        .output()?;
+    if !out.status.success() {
+        anyhow::bail!(
+            "firmware/report.sh (FEATURES={features:?}, NO_DEFAULT={no_default}) failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let text = std::fs::read_to_string(&kv)?;
+    let _ = std::fs::remove_file(&kv);
+    text.split_whitespace()
+        .map(|pair| {
+            let (k, v) = pair
+                .split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("report.sh wrote `{pair}`, not key=value"))?;
+            Ok((k.to_string(), v.parse::<u64>()?))
+        })
+        .collect()
+}
+
+/// The firmware's budget table: every build of [`BUDGET_BUILDS`] through `firmware/report.sh`.
+fn firmware_budget_table() -> anyhow::Result<String> {
+    let mut out = String::from(
+        "| build (`firmware/report.sh`, QEMU `-icount shift=0`) | one step, mean / worst (instructions; budget ≤ 10,000) | worst step at 168 MHz, 1 instruction/cycle | flash, image with the 9,820-byte blob (budget ≤ 65,536 B) | static RAM (budget ≤ 32,768 B) | peak stack, flying |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
+    for (label, features, no_default) in BUDGET_BUILDS {
+        let r = firmware_report(features, no_default)?;
+        let get = |k: &str| {
+            r.get(k)
+                .copied()
+                .ok_or_else(|| anyhow::anyhow!("report.sh gave no `{k}`"))
+        };
+        let max = get("max_instructions")?;
+        out += &format!(
+            "| {label} | {} / {} | {:.1} µs | {} B | {} B | {} B |\n",
+            thousands(get("mean_instructions")?),
+            thousands(max),
+            max as f64 / 168.0,
+            thousands(get("flash_bytes")?),
+            thousands(get("sram_bytes")?),
+            thousands(get("stack_peak_bytes")?),
+        );
+    }
+    Ok(out)
+}
+
+/// Whether the firmware's budget can be measured here (QEMU); under CI its absence is an error.
+fn qemu_present() -> anyhow::Result<bool> {
+    let found = std::process::Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            anyhow::bail!(
+                "qemu-system-arm is missing: the firmware-budget block needs it (apt-get install qemu-system-arm)"
+            );
+        }
+        eprintln!(
+            "doc_tables: WARNING: no qemu-system-arm, so the firmware-budget block is left as the pages have it (apt-get install qemu-system-arm to measure it)"
+        );
+    }
+    Ok(found)
+}
+
+/// Every block this program writes, by name (`firmware-budget` only with QEMU).
 fn generate() -> anyhow::Result<BTreeMap<&'static str, String>> {
     let mut b = BTreeMap::new();
+    if qemu_present()? {
+        eprintln!(
+            "doc_tables: measuring the firmware under QEMU (firmware/report.sh, 3 builds)..."
+        );
+        b.insert("firmware-budget", firmware_budget_table()?);
+    }
     b.insert("laws", laws_table()?);
     b.insert("rotor-loss-set", rotor_loss_table()?);
     b.insert("default-vs-paper", default_vs_paper_table()?);
@@ -306,14 +421,17 @@ fn rewrite(
         let j = rest[body_start..].find(&close).ok_or_else(|| {
             anyhow::anyhow!("{page}: block `{name}` has no closing `{close}` marker")
         })?;
-        let body = blocks.get(name.as_str()).ok_or_else(|| {
-            anyhow::anyhow!(
-                "{page}: block `{name}` is not one doc_tables writes ({:?})",
-                blocks.keys().collect::<Vec<_>>()
-            )
-        })?;
         let old = &rest[body_start..body_start + j];
         let old = old.strip_prefix('\n').unwrap_or(old).to_string();
+        let body = match blocks.get(name.as_str()) {
+            Some(b) => b,
+            // Not measurable on this machine (qemu_present warned): the page's text stays.
+            None if name == "firmware-budget" => &old,
+            None => anyhow::bail!(
+                "{page}: block `{name}` is not one doc_tables writes ({:?})",
+                blocks.keys().collect::<Vec<_>>()
+            ),
+        };
         out += &rest[..body_start];
         out += "\n";
         out += body;
@@ -365,7 +483,10 @@ fn main() -> anyhow::Result<()> {
                 eprintln!("doc_tables: rewrote {page} ({})", names.join(", "));
             } else {
                 for (name, page_block) in &found {
-                    let code_block = blocks.get(name.as_str()).map_or("", String::as_str);
+                    // A block not measured here (no QEMU) is left as the page has it.
+                    let Some(code_block) = blocks.get(name.as_str()) else {
+                        continue;
+                    };
                     if page_block != code_block {
                         stale.push(format!(
                             "{page}, block `{name}`: {}",
