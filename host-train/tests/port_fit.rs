@@ -213,3 +213,41 @@ fn pinned_torque_gains_stay_at_the_description_and_the_rest_is_recovered() {
         );
     }
 }
+
+#[test]
+fn the_torque_gain_prior_pulls_toward_the_description_in_proportion_to_its_weight() {
+    let base = base_model();
+    let scaling = Scaling::of(&base);
+    let p_true = truth_params();
+    let truth = base.with_port(scaling.to_port(&p_true));
+    let data = synthetic(&truth, 60, 13);
+    let ids: Vec<usize> = (0..data.windows.len()).collect();
+    let gains = |weight: f64| -> Vec<f64> {
+        let cfg = PortFitConfig {
+            iterations: 30,
+            torque_gain_prior: weight,
+            ..PortFitConfig::default()
+        };
+        let start = default_port_start(&cfg.structure);
+        let (fitted, _) = fit_port(&base, &data, &ids, &start, &cfg, |_| {});
+        scaling.to_params(fitted.port())[1..4].to_vec()
+    };
+    // A weight far below the data's pull leaves the gains where the data put them.
+    let weak = gains(1e-4);
+    for (k, t) in weak.iter().zip(&p_true[1..4]) {
+        assert!(
+            (k - t).abs() <= 0.1 * t,
+            "weak prior: gain {k:.3}, true {t:.3}"
+        );
+    }
+    // A weight far above it holds them at the description's 1.
+    let strong = gains(100.0);
+    for k in &strong {
+        assert!((k - 1.0).abs() < 0.05, "strong prior: gain {k:.3}");
+    }
+    // In between, every gain sits between the two.
+    let mid = gains(0.05);
+    for ((m, w), s) in mid.iter().zip(&weak).zip(&strong) {
+        assert!(m > w && m < s, "gain {m:.3} not between {w:.3} and {s:.3}");
+    }
+}

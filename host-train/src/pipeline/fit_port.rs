@@ -55,6 +55,11 @@ pub struct FitPortArgs {
     /// with such gains over-drives the real rotors.
     #[arg(long)]
     pub pin_torque_gains: bool,
+    /// Pull the free torque gains toward the vehicle description's 1 with this weight: the
+    /// fit's cost (the mean scaled error norm) of a unit deviation per axis; 0 (the default):
+    /// no prior. Between free gains (0) and pinned ones (--pin-torque-gains).
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub torque_gain_prior: f64,
     /// Leave out the flights whose file name (the imported log's, else the dataset's) starts
     /// with TYPE from the fit and score them (model selection on the training flights: leave
     /// one flight type out).
@@ -84,6 +89,8 @@ pub struct FitPortReport {
     pub port: PortReport,
     /// The structure fitted.
     pub structure: PortStructure,
+    /// The torque gains' prior weight (`--torque-gain-prior`; 0: none).
+    pub torque_gain_prior: f64,
     /// The starting blob.
     pub weights: String,
     /// The dataset.
@@ -169,10 +176,17 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         drag: !args.no_drag,
         torque_gains: !args.pin_torque_gains,
     };
+    if !(args.torque_gain_prior.is_finite() && args.torque_gain_prior >= 0.0) {
+        bail!(
+            "--torque-gain-prior must be a finite weight ≥ 0, got {}",
+            args.torque_gain_prior
+        );
+    }
     let cfg = PortFitConfig {
         iterations: args.fit.iterations,
         scales,
         structure,
+        torque_gain_prior: args.torque_gain_prior,
         ..PortFitConfig::default()
     };
     if !args.quiet {
@@ -231,6 +245,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
     let report = FitPortReport {
         port: port_fit::report(&model),
         structure,
+        torque_gain_prior: args.torque_gain_prior,
         weights: args.weights.display().to_string(),
         data: args.data.display().to_string(),
         hold_out: args.hold_out.clone(),

@@ -135,11 +135,34 @@ pub(crate) struct Problem<'a> {
     pub scales: [f64; 4],
     /// Threads for the Jacobian.
     pub threads: usize,
+    /// Priors on single parameters: (index, target, weight). Each adds one residual triple
+    /// whose share of [`cost`] is weight · |p[index] − target| (for deviations well above the
+    /// robust δ), whatever the number of windows.
+    pub priors: &'a [Prior],
+}
+
+/// A prior on one parameter of a fit ([`Problem::priors`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Prior {
+    /// The parameter's index.
+    pub index: usize,
+    /// The value the prior pulls toward.
+    pub target: f64,
+    /// The cost of a unit deviation, in the fit's cost units (the mean scaled error norm).
+    pub weight: f64,
 }
 
 impl Problem<'_> {
     fn residuals(&self, p: &[f64]) -> Vec<f64> {
-        residuals(self.roll, p, self.data, self.ids, &self.scales)
+        let mut r = residuals(self.roll, p, self.data, self.ids, &self.scales);
+        // The data's triples; each prior triple is scaled by their number so that its share
+        // of the mean is its weight times the deviation.
+        let n = (r.len() / 3) as f64;
+        for prior in self.priors {
+            let x = p.get(prior.index).copied().unwrap_or(prior.target);
+            r.extend([prior.weight * n * (x - prior.target), 0.0, 0.0]);
+        }
+        r
     }
 }
 

@@ -19,7 +19,7 @@ use hamflight::model::{HamiltonianModel, LearnedModel, PortTerms, State, MAX_MOT
 use serde::Serialize;
 
 use super::data::Windows;
-use super::lm::{lm_fit, FitStep, Problem, Roll};
+use super::lm::{lm_fit, FitStep, Prior, Problem, Roll};
 use super::response::{rollout, Response};
 
 /// Number of fitted numbers (the scaled parameters, module docs).
@@ -187,6 +187,11 @@ pub struct PortFitConfig {
     pub threads: usize,
     /// Which terms the fit uses.
     pub structure: PortStructure,
+    /// A prior pulling each free torque gain k_τ toward the vehicle description's 1: the cost
+    /// (in the fit's units, the mean scaled error norm) of a unit deviation per axis; 0: none.
+    /// Flights flown in closed loop bias free gains toward zero (docs/benchmark.md "What the
+    /// data identify"), and a blob whose gains are far below the rotors' over-drives them.
+    pub torque_gain_prior: f64,
 }
 
 impl Default for PortFitConfig {
@@ -196,6 +201,7 @@ impl Default for PortFitConfig {
             scales: [0.1, 0.5, 0.2, 0.6],
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             structure: PortStructure::default(),
+            torque_gain_prior: 0.0,
         }
     }
 }
@@ -243,6 +249,17 @@ pub fn fit(
             }
         }
     };
+    let priors: Vec<Prior> = if s.torque_gains && cfg.torque_gain_prior > 0.0 {
+        TORQUE_GAIN
+            .map(|index| Prior {
+                index,
+                target: 1.0,
+                weight: cfg.torque_gain_prior,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let roll = PortRoll { base, scaling };
     let problem = Problem {
         roll: &roll,
@@ -250,6 +267,7 @@ pub fn fit(
         ids,
         scales: cfg.scales,
         threads: cfg.threads,
+        priors: &priors,
     };
     let (p, steps) = lm_fit(
         &problem,

@@ -401,6 +401,7 @@ pub fn fit<M: HamiltonianModel + Sync>(
         ids,
         scales: cfg.scales,
         threads: cfg.threads,
+        priors: &[],
     };
     let (p, steps) = lm_fit(
         &problem,
