@@ -128,19 +128,25 @@ fn run(cli: Cli) -> Result<()> {
                 p.gyrator_rad_s2_per_m_s[0][1], p.gyrator_rad_s2_per_m_s[1][0], p.tilt_rad_s2
             );
             if let Some(c) = &r.flight_check {
-                println!("flight check against the untrained prior (RMSE t ≥ 5 s):");
+                println!(
+                    "flight check (RMSE t ≥ 5 s; against the untrained prior, or survived alone):"
+                );
                 for f in &c.flights {
                     let cm = |x: Option<f64>, crash: Option<f64>| match (x, crash) {
                         (_, Some(t)) => format!("crash at {t:.2} s"),
                         (Some(x), None) => format!("{:.3} cm", 100.0 * x),
                         (None, None) => "-".to_string(),
                     };
+                    let prior = if f.against_prior {
+                        format!("prior {:>18}", cm(f.prior_rmse_m, f.prior_crash_s))
+                    } else {
+                        "(survive)".to_string()
+                    };
                     println!(
-                        "  {:<22} {:<9} fitted {:>18}   prior {:>18}",
+                        "  {:<22} {:<9} fitted {:>18}   {prior}",
                         f.scenario,
                         f.law,
                         cm(f.rmse_m, f.crash_s),
-                        cm(f.prior_rmse_m, f.prior_crash_s)
                     );
                 }
             }

@@ -11,7 +11,7 @@ use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, PortTerms};
 use hamflight::{AdaptationLaw, Gains};
 use host_train::control::{airframe_of, gains_for, CoreController};
 use host_train::fly::{fly_scenario, Report};
-use host_train::pipeline::{prior_of, run_prior_check};
+use host_train::pipeline::{prior_of, run_prior_check, run_safety_check};
 use host_train::Scenario;
 use nalgebra::Vector3;
 
@@ -144,4 +144,32 @@ fn the_check_refuses_port_terms_that_fly_worse_than_the_prior() {
         why.contains("law") && why.contains("port-law-spiral"),
         "{why}"
     );
+}
+
+/// A plant the blob only has to survive (`fit-port --flight-survive`): the rigid body, where
+/// torques ten times too weak in the model make the law ask ten times too much, is lost and
+/// the check says so; the rigid body's own model survives it, and is compared with no prior.
+#[test]
+fn the_survival_check_refuses_a_blob_that_loses_the_rigid_vehicle() {
+    let rigid = scenario("rigid", "");
+    let mut wrong = PortTerms::IDENTITY;
+    wrong.torque_gain_offset = [-0.9, -0.9, -0.9];
+    wrong.torque_lag_s = 0.04;
+    let check =
+        run_safety_check(&model(wrong), &[], std::slice::from_ref(&rigid)).expect("the check runs");
+    let why = check
+        .failure
+        .expect("the blob that loses the rigid vehicle is refused");
+    assert!(
+        why.contains("crashed") && why.contains("port-law-rigid"),
+        "{why}"
+    );
+    let check =
+        run_safety_check(&model(PortTerms::IDENTITY), &[], &[rigid]).expect("the check runs");
+    assert_eq!(check.failure, None, "{:?}", check.flights);
+    assert_eq!(check.flights.len(), 2, "both laws flown");
+    for f in &check.flights {
+        assert!(!f.against_prior && f.prior_rmse_m.is_none() && f.prior_crash_s.is_none());
+        assert!(f.rmse_m.is_some(), "{f:?}");
+    }
 }

@@ -74,6 +74,12 @@ pub struct FitPortArgs {
     /// nothing if the fitted blob crashes or tracks worse than the prior.
     #[arg(long, value_name = "FILE.toml")]
     pub flight_check: Vec<PathBuf>,
+    /// Fly the fitted blob on this scenario (repeatable) under both laws and write nothing if
+    /// it crashes: a plant it must survive without being compared with the prior (e.g.
+    /// scenarios/bl-calm-spiral.toml, the description's rigid body: the other vehicle the
+    /// logs could be).
+    #[arg(long, value_name = "FILE.toml")]
+    pub flight_survive: Vec<PathBuf>,
     /// Output: the blob with the fitted port terms (a report beside it, FILE.hfw.json).
     #[arg(long, value_name = "FILE.hfw")]
     pub out: PathBuf,
@@ -132,6 +138,11 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
     }
     let scenarios = args
         .flight_check
+        .iter()
+        .map(Scenario::load)
+        .collect::<Result<Vec<_>>>()?;
+    let survive = args
+        .flight_survive
         .iter()
         .map(Scenario::load)
         .collect::<Result<Vec<_>>>()?;
@@ -224,20 +235,29 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         .port()
         .validate()
         .map_err(|e| anyhow::anyhow!("the fitted port terms cannot be flown: {e:?}"))?;
-    let flight_check = if scenarios.is_empty() {
+    let flight_check = if scenarios.is_empty() && survive.is_empty() {
         None
     } else {
         if !quiet {
             eprintln!("flight check: the fitted blob against the untrained prior, both laws");
         }
-        let c = prior_check::run(&model, &scenarios)?;
+        let c = prior_check::run_with_safety(&model, &scenarios, &survive)?;
         if let Some(why) = &c.failure {
-            bail!(
-                "flight check failed: {why}. Nothing was written. The fitted terms make the \
-                 vehicle of the check scenario fly worse than a blob that knows only its rigid \
-                 body: fit with fewer terms (--no-tilt, --no-gyrator), on more varied flights, \
-                 or check that the scenario describes the vehicle the flights came from"
-            );
+            let lost_a_survival = c
+                .flights
+                .iter()
+                .any(|f| !f.against_prior && f.crash_s.is_some());
+            let advice = if lost_a_survival {
+                "The fitted terms lose a vehicle the blob must survive (--flight-survive): \
+                 pull the torque gains toward the description (--torque-gain-prior W, or \
+                 --pin-torque-gains), or fit with fewer terms"
+            } else {
+                "The fitted terms make the vehicle of the check scenario fly worse than a blob \
+                 that knows only its rigid body: fit with fewer terms (--no-tilt, \
+                 --no-gyrator), on more varied flights, or check that the scenario describes \
+                 the vehicle the flights came from"
+            };
+            bail!("flight check failed: {why}. Nothing was written. {advice}");
         }
         Some(c)
     };

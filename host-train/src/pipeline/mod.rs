@@ -5,7 +5,7 @@
 //! the blob), [`run_train_cli`] (`train::run_cli`: `host-train train`); the flight check's
 //! [`run_flight_check`], [`require_flight_check`], [`flight_check_scenario_spec`],
 //! [`FLIGHT_CHECK_ADAPTIVE_MARGIN`] (`check::{run, require, scenario_spec, ADAPTIVE_MARGIN}`);
-//! [`run_prior_check`], [`prior_of`]; [`run_score`], [`score_table`], [`ScoreArgs`]
+//! [`run_prior_check`], [`run_safety_check`], [`prior_of`]; [`run_score`], [`score_table`], [`ScoreArgs`]
 //! (`score::{run, table}`); [`load_response`]; [`run_vehicle_study`], [`vehicle_study_table`],
 //! [`VehicleStudyArgs`], [`StudyReport`], [`logging_controller`], [`TRUE_COMPOSITE`]
 //! (`vehicle_study::{run, table, ..}`).
@@ -26,7 +26,7 @@ pub use check::{
     scenario_spec as flight_check_scenario_spec, ADAPTIVE_MARGIN as FLIGHT_CHECK_ADAPTIVE_MARGIN,
 };
 pub use fit_response::load_response;
-pub use prior_check::{prior_of, run as run_prior_check};
+pub use prior_check::{prior_of, run as run_prior_check, run_with_safety as run_safety_check};
 pub use score::{run as run_score, table as score_table, ScoreArgs};
 pub use train::{run as run_train, run_cli as run_train_cli};
 pub use vehicle_study::{
