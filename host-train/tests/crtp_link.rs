@@ -377,7 +377,7 @@ fn lockstep_stub(
         if parse_imu(d).is_some() {
             log.ticks += 1;
             let t = log.ticks;
-            if t > boot_ticks && t % skip_every != 0 {
+            if t > boot_ticks && !t.is_multiple_of(skip_every) {
                 let f = mass_kg * (g + 30.0 * (z_ref.0 - z) + 10.0 * (z_ref.1 - vz));
                 let pwm = force_to_pwm(f / 4.0);
                 sock.send_to(&motor_packet([pwm; 4]), plant_addr).unwrap();
@@ -405,20 +405,20 @@ fn lockstep_stub(
     log
 }
 
-/// One lock-stepped flight against the stub, as `firmware_sitl_plant --lockstep` flies: per
-/// millisecond the pose and the setpoint due (every 10 ms), then the IMU sample through
-/// `CrtpLockstep::step`, then the plant 1 ms with the last motor command. Returns the stub's log,
-/// every tick's answer, the plant's final state and the motor packets the link counted.
-fn fly_lockstepped(
-    ticks: u32,
-    boot_ticks: u32,
-    skip_every: u32,
-) -> (
+/// A lock-stepped flight: the stub's log, every tick's answer (tick, motor packet, other
+/// datagrams), the plant's final state, the motor packets the link counted.
+type LockstepFlight = (
     LockstepStubLog,
     Vec<(u32, Option<[u16; 4]>, usize)>,
     PlantState,
     u64,
-) {
+);
+
+/// One lock-stepped flight against the stub, as `firmware_sitl_plant --lockstep` flies: per
+/// millisecond the pose and the setpoint due (every 10 ms), then the IMU sample through
+/// `CrtpLockstep::step`, then the plant 1 ms with the last motor command. Returns the stub's log,
+/// every tick's answer, the plant's final state and the motor packets the link counted.
+fn fly_lockstepped(ticks: u32, boot_ticks: u32, skip_every: u32) -> LockstepFlight {
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     let addr = sock.local_addr().unwrap();
     let mut plant = Plant::nominal(PlantState::at_rest(Vector3::new(0.0, 0.0, 1.0), 0.0));
@@ -483,7 +483,9 @@ fn the_plant_flies_a_lockstepped_stub_tick_by_tick_and_repeatably() {
     // order, and every motor packet the stub sent arrived in the tick it was sent in.
     assert_eq!(log.ticks, ticks);
     assert_eq!(answers.len() as u32, ticks);
-    let expected_motors = (1..=ticks).filter(|t| *t > boot && t % skip != 0).count();
+    let expected_motors = (1..=ticks)
+        .filter(|t| *t > boot && !t.is_multiple_of(skip))
+        .count();
     assert_eq!(log.motors_sent as usize, expected_motors);
     assert_eq!(motors as usize, expected_motors);
     for (k, (tick, motor, _)) in answers.iter().enumerate() {
@@ -491,7 +493,7 @@ fn the_plant_flies_a_lockstepped_stub_tick_by_tick_and_repeatably() {
         assert_eq!(*tick, t, "answers out of order");
         assert_eq!(
             motor.is_some(),
-            t > boot && t % skip != 0,
+            t > boot && !t.is_multiple_of(skip),
             "tick {t}: a motor packet where the stub sent none, or the reverse"
         );
     }
