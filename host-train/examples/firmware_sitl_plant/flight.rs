@@ -21,6 +21,7 @@ use host_train::io::{
 };
 use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
 
 use crate::crtp::{param_answer, Console, Firmware, FromFirmware};
 use crate::record::{plot, write_csv, Sample};
@@ -259,6 +260,12 @@ pub fn run() -> Result<()> {
     // agree here had the same firmware output every millisecond.
     let mut motor_digest: u64 = 0xcbf2_9ce4_8422_2325;
     let pace = !args.lockstep || args.realtime;
+    // Motor-command impairments (lock-step only, repeatable): commands waiting for the plant
+    // tick they reach it at, the draws, and how many were dropped.
+    let mut motor_queue: std::collections::VecDeque<(u64, [u16; 4])> = Default::default();
+    let mut impair_rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
+    let mut motor_dropped = 0u64;
+    let mut plant_pwm = [0u16; 4];
 
     // --- the loop: 1 ms of plant per IMU packet, paced at 1 kHz of wall clock (or lock-step) -
     const DT: f64 = 1e-3;
@@ -312,10 +319,16 @@ pub fn run() -> Result<()> {
         60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s + args.linger_s;
     loop {
         let t = plant.t_s();
-        let (pwm, motor_packets) = {
+        let (mut pwm, motor_packets) = {
             let sh = shared.lock().unwrap();
             (sh.pwm, sh.motor_packets)
         };
+        if link.is_some() {
+            while motor_queue.front().is_some_and(|x| x.0 <= k) {
+                plant_pwm = motor_queue.pop_front().unwrap().1;
+            }
+            pwm = plant_pwm;
+        }
         // The stabilizer loop started: its console line, or in lock-step its first motor packet
         // (the console pipe is read on its own thread: when a line arrives is not repeatable).
         let stab_started = if args.lockstep {
@@ -642,6 +655,21 @@ pub fn run() -> Result<()> {
                 .with_context(|| format!("plant t = {:.3} s", plant.t_s()))?;
             let mut sh = shared.lock().unwrap();
             if let Some(p) = tick.motor {
+                let drop = args.motor_drop > 0.0 && impair_rng.gen_bool(args.motor_drop.min(1.0));
+                let jitter = if args.motor_jitter_ms > 0 {
+                    impair_rng.gen_range(0..=args.motor_jitter_ms as u64)
+                } else {
+                    0
+                };
+                if drop {
+                    motor_dropped += 1;
+                } else {
+                    // reaches the plant at loop step k + delay (k: already the next step), never
+                    // before a command sent earlier
+                    let at = (k + args.motor_delay_ms as u64 + jitter)
+                        .max(motor_queue.back().map_or(0, |x| x.0));
+                    motor_queue.push_back((at, p));
+                }
                 sh.pwm = p;
                 sh.motor_packets += 1;
                 for b in (tick.tick as u64)
@@ -880,6 +908,14 @@ pub fn run() -> Result<()> {
         "motor_packets_per_s_in_flight": engage_motor_rate,
         "motor_gap_max_ms": motor_gap_max_s * 1e3,
         "motor_gaps_4ms": motor_gaps_4ms,
+        "motor_impairment": (args.motor_delay_ms > 0 || args.motor_jitter_ms > 0 || args.motor_drop > 0.0)
+            .then(|| serde_json::json!({
+                "delay_ms": args.motor_delay_ms,
+                "jitter_ms": args.motor_jitter_ms,
+                "drop": args.motor_drop,
+                "seed": args.seed,
+                "dropped": motor_dropped,
+            })),
     });
     host_train::io::write_json_atomic(&args.out.join("summary.json"), &summary)?;
     println!(

@@ -138,6 +138,21 @@ struct Args {
     /// With --lockstep: seconds the firmware may take for one tick before the run fails.
     #[arg(long, default_value_t = 10.0)]
     tick_timeout_s: f64,
+    /// With --lockstep: the motor commands reach the plant this many milliseconds late (a
+    /// transport delay, repeatable; for studying the loop's timing margin).
+    #[arg(long, default_value_t = 0, requires = "lockstep")]
+    motor_delay_ms: u32,
+    /// With --lockstep: each motor command is further delayed by 0..=N ms, drawn per command
+    /// (`--seed`), order kept: the irregular delivery of a wall-clock run, repeatable.
+    #[arg(long, default_value_t = 0, requires = "lockstep")]
+    motor_jitter_ms: u32,
+    /// With --lockstep: the fraction of motor packets lost (the plant holds the last), drawn per
+    /// packet (`--seed`).
+    #[arg(long, default_value_t = 0.0, requires = "lockstep")]
+    motor_drop: f64,
+    /// Seed of --motor-jitter-ms and --motor-drop.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// Directory for flight.csv, flight.svg, console.log, summary.json.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,
