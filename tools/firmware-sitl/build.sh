@@ -26,7 +26,8 @@ app-config), as a Linux executable:
 
   1. cargo builds the hamflight-bitcraze static library for the host triple (profile bitcraze);
      firmware/bitcraze-app/rust-object.sh turns it into one object exporting only the C API;
-  2. patches/cf-*.patch are applied to copies of the checkout's files, and
+  2. patches/cf-*.patch are applied to copies of the checkout's files (cf-lockstep.patch: lock-step
+     timing, opt-in at run time with CF2_LOCKSTEP=1), and
      patches/hamflight-oot-crazysim-2024.patch to a copy of firmware/bitcraze-app/hamflight_oot.c
      (the fork's firmware is crazyflie-firmware of April 2024; the shim follows a newer one);
   3. CMake (CMakeLists.txt here) adds the checkout's sitl_make/ project and builds its target cf2
@@ -49,7 +50,9 @@ Needs: cmake >= 3.18, a host C compiler (gcc), binutils (ld, objcopy, nm), patch
 the Rust toolchain of this repository (cargo).
 
 Run it: python3 $here/smoke.py --binary DIR/cmake/cf2_sitl/cf2 (plays CrazySim's simulator side
-over UDP, then connects cflib; see README.md). Exit 2: usage; 1: a missing tool or checkout part,
+over UDP, then connects cflib; see README.md). With CF2_LOCKSTEP=1 in its environment the firmware
+runs in lock-step (patches/cf-lockstep.patch: one FreeRTOS tick per IMU packet, a tick-done packet
+after each; host-train's firmware_sitl_plant --lockstep); without it, on its wall-clock timer. Exit 2: usage; 1: a missing tool or checkout part,
 a patch that no longer applies, a failed build.
 EOF
 }

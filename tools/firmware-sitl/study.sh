@@ -10,12 +10,15 @@
 #   - a lost radio link 5 s into a hover (setpoints and pose stop);
 #   - an estimator reset 5 s into a hover (kalman.resetEstimation = 1 over CRTP);
 # and prints a markdown table (also OUT_DIR/table.md), each flight's files in OUT_DIR/<name>/.
-# Each flight runs in real time (20-40 s); the whole study takes about 5 minutes after the build.
+# The flights run in lock-step with the firmware (patches/cf-lockstep.patch, the plant's
+# --lockstep): one firmware tick per plant millisecond, repeatable, 1-3 s of wall clock per 20 s
+# flight; the whole study takes about 30 s after the build. STUDY_TIMING=wall-clock flies them
+# paced by the wall clock instead (the firmware on its own timer, 20-40 s each, not repeatable).
 # Exit 1 if a flight crashed or failed, after the table.
 set -euo pipefail
 
 usage() {
-    sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
     echo
     echo "usage: $(basename "$0") FIRMWARE_CHECKOUT [OUT_DIR]   (default OUT_DIR: target/firmware-sitl/study)"
 }
@@ -31,8 +34,13 @@ command -v python3 >/dev/null || { echo "study.sh: python3 is needed for the tab
 "$root/tools/firmware-sitl/build.sh" "$checkout"
 (cd "$root" && cargo build --release -p host-train --example firmware_sitl_plant)
 fw=$root/target/firmware-sitl/cmake/cf2_sitl/cf2
-plant=$root/target/release/examples/firmware_sitl_plant
+plant=${CARGO_TARGET_DIR:-$root/target}/release/examples/firmware_sitl_plant
 mkdir -p "$out"
+case "${STUDY_TIMING:-lockstep}" in
+    lockstep) timing=(--lockstep) ;;
+    wall-clock) timing=() ;;
+    *) echo "study.sh: STUDY_TIMING is lockstep or wall-clock" >&2; exit 2 ;;
+esac
 
 failed=0
 fly() { # name scenario [extra args]
@@ -40,7 +48,7 @@ fly() { # name scenario [extra args]
     shift 2
     echo "== $name"
     if ! (cd "$root" && "$plant" --firmware "$fw" --scenario "scenarios/$scenario.toml" \
-        --window-s 5 --out "$out/$name" "$@" >"$out/$name.log" 2>&1); then
+        --window-s 5 --out "$out/$name" "${timing[@]}" "$@" >"$out/$name.log" 2>&1); then
         echo "   FAILED (exit $?): $out/$name.log" >&2
         failed=1
     fi
@@ -54,16 +62,18 @@ fly link-loss hover --link-loss-s 5
 fly estimator-reset hover --estimator-reset-s 5
 
 commit=$(git -C "$checkout" rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
-python3 - "$out" "$commit" <<'EOF' | tee "$out/table.md"
+python3 - "$out" "$commit" "${STUDY_TIMING:-lockstep}" <<'EOF' | tee "$out/table.md"
 import json, os, sys
-out, commit = sys.argv[1], sys.argv[2]
+out, commit, timing = sys.argv[1], sys.argv[2], sys.argv[3]
 def load(name):
     p = os.path.join(out, name, "summary.json")
     return json.load(open(p)) if os.path.exists(p) else None
 def num(x, fmt="{:.2f}"):
     return "—" if x is None else fmt.format(x)
 print(f"Firmware `{commit}` (CrazySim SITL) with hamflight's app (the shim's default law), "
-      "cflib full-state setpoints at 100 Hz, perfect pose at 100 Hz, real-time pacing.\n")
+      "cflib full-state setpoints at 100 Hz, perfect pose at 100 Hz, "
+      + ("lock-step timing (one firmware tick per plant millisecond).\n" if timing == "lockstep"
+         else "real-time pacing.\n"))
 print("| scenario | RMSE t ≥ 5 s into the hold (cm) | max (cm) | take-off / landing RMSE (cm) | crashed |")
 print("| --- | --- | --- | --- | --- |")
 for s in ["cf-hover-lag50", "cf-calm-spiral", "cf-paper-spiral", "cf-rotor-loss", "cf-hover-wind", "gust-spiral"]:

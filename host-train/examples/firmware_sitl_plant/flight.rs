@@ -1,5 +1,6 @@
-//! The flight: the firmware started and answered, the plant stepped every millisecond of wall
-//! clock, the setpoints from the ground to the hold and back, and the flight's numbers.
+//! The flight: the firmware started and answered, the plant stepped every millisecond (of wall
+//! clock, or in lock-step with the firmware's tick), the setpoints from the ground to the hold and
+//! back, and the flight's numbers.
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::{SocketAddr, UdpSocket};
@@ -13,13 +14,14 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use host_train::io::{
-    ext_pose_packet, full_state_setpoint_packet, hl_go_to_packet, hl_land_packet, hl_stop_packet,
-    hl_takeoff_packet, imu_packet, param_toc_request, param_write_float, param_write_u8,
-    parse_motor, position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, CRTP_HANDSHAKE,
-    CRTP_PORT_SIM,
+    crtp_await_handshake, ext_pose_packet, full_state_setpoint_packet, hl_go_to_packet,
+    hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, param_toc_request,
+    param_write_float, param_write_u8, parse_motor, position_setpoint_packet, pwm_to_rpm,
+    stop_setpoint_packet, CrtpLockstep, CRTP_HANDSHAKE, CRTP_PORT_SIM,
 };
 use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
 
 use crate::crtp::{param_answer, Console, Firmware, FromFirmware};
 use crate::record::{plot, write_csv, Sample};
@@ -105,8 +107,9 @@ pub fn run() -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let relayed = Arc::new(AtomicU64::new(0));
 
-    // Receiving thread: handshake, motor commands, relay of the rest to cflib.
-    {
+    // Receiving thread (wall clock only; in lock-step the loop reads the firmware's packets):
+    // handshake, motor commands, relay of the rest to cflib.
+    if !args.lockstep {
         let sock = sock.try_clone()?;
         let lib = lib_sock.as_ref().map(|s| s.try_clone()).transpose()?;
         let (shared, lib_addr, stop, relayed) = (
@@ -176,6 +179,11 @@ pub fn run() -> Result<()> {
     } else {
         Command::new(&fw_path)
     };
+    if args.lockstep {
+        cmd.env("CF2_LOCKSTEP", "1");
+    } else {
+        cmd.env_remove("CF2_LOCKSTEP");
+    }
     cmd.arg(args.port.to_string())
         .arg("127.0.0.1")
         .stdout(Stdio::piped())
@@ -200,14 +208,20 @@ pub fn run() -> Result<()> {
         });
     }
     let hs_end = Instant::now() + Duration::from_secs(10);
-    let fw_addr = loop {
-        if let Some(a) = shared.lock().unwrap().fw_addr {
-            break a;
+    let fw_addr = if args.lockstep {
+        let a = crtp_await_handshake(&sock, Duration::from_secs(10))?;
+        shared.lock().unwrap().fw_addr = Some(a);
+        a
+    } else {
+        loop {
+            if let Some(a) = shared.lock().unwrap().fw_addr {
+                break a;
+            }
+            if Instant::now() > hs_end {
+                bail!("no handshake from the firmware within 10 s");
+            }
+            thread::sleep(Duration::from_millis(5));
         }
-        if Instant::now() > hs_end {
-            bail!("no handshake from the firmware within 10 s");
-        }
-        thread::sleep(Duration::from_millis(5));
     };
     println!(
         "[{:6.2} s] handshake from {fw_addr}",
@@ -232,7 +246,28 @@ pub fn run() -> Result<()> {
         ]
     };
 
-    // --- the loop: 1 ms of plant per IMU packet, paced at 1 kHz of wall clock ----------------
+    // Lock-step: the loop sends the IMU packet last and waits for the firmware's tick.
+    let mut link = if args.lockstep {
+        Some(CrtpLockstep::new(
+            sock.try_clone()?,
+            fw_addr,
+            Duration::from_secs_f64(args.tick_timeout_s),
+        ))
+    } else {
+        None
+    };
+    // Every motor command of a lock-stepped run with its tick, hashed (FNV-1a): two runs that
+    // agree here had the same firmware output every millisecond.
+    let mut motor_digest: u64 = 0xcbf2_9ce4_8422_2325;
+    let pace = !args.lockstep || args.realtime;
+    // Motor-command impairments (lock-step only, repeatable): commands waiting for the plant
+    // tick they reach it at, the draws, and how many were dropped.
+    let mut motor_queue: std::collections::VecDeque<(u64, [u16; 4])> = Default::default();
+    let mut impair_rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
+    let mut motor_dropped = 0u64;
+    let mut plant_pwm = [0u16; 4];
+
+    // --- the loop: 1 ms of plant per IMU packet, paced at 1 kHz of wall clock (or lock-step) -
     const DT: f64 = 1e-3;
     let mut samples: Vec<Sample> = Vec::new();
     let mut stab_started_at: Option<f64> = None; // plant time
@@ -252,7 +287,8 @@ pub fn run() -> Result<()> {
     let mut deadline = loop_start;
     let mut k: u64 = 0;
     let mut motor_at_engage = 0u64;
-    let mut engage_wall: Option<Instant> = None;
+    // Take-off: the wall clock and the plant time (the motor packet rate in flight).
+    let mut engage_wall: Option<(Instant, f64)> = None;
     let mut engage_motor_rate = 0.0;
     // The mixer parameters: their ids from the TOC (scanned from id 0), then written by id.
     let mut mixer_ids: Vec<Option<u16>> = vec![None; mixer_params.len()];
@@ -283,15 +319,26 @@ pub fn run() -> Result<()> {
         60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s + args.linger_s;
     loop {
         let t = plant.t_s();
-        let (pwm, motor_packets) = {
+        let (mut pwm, motor_packets) = {
             let sh = shared.lock().unwrap();
             (sh.pwm, sh.motor_packets)
         };
-        if stab_started_at.is_none()
-            && console
+        if link.is_some() {
+            while motor_queue.front().is_some_and(|x| x.0 <= k) {
+                plant_pwm = motor_queue.pop_front().unwrap().1;
+            }
+            pwm = plant_pwm;
+        }
+        // The stabilizer loop started: its console line, or in lock-step its first motor packet
+        // (the console pipe is read on its own thread: when a line arrives is not repeatable).
+        let stab_started = if args.lockstep {
+            motor_packets > 0
+        } else {
+            console
                 .wait_for("Starting stabilizer loop", Duration::ZERO)
                 .is_some()
-        {
+        };
+        if stab_started_at.is_none() && stab_started {
             stab_started_at = Some(t);
             println!(
                 "[{:6.2} s] stabilizer loop started (plant t = {t:.3} s)",
@@ -438,13 +485,18 @@ pub fn run() -> Result<()> {
             phase
         };
         if phase == "takeoff" && engage_wall.is_none() {
-            engage_wall = Some(Instant::now());
+            engage_wall = Some((Instant::now(), t));
             motor_at_engage = motor_packets;
         }
         if phase == "landed" {
-            if let Some(w) = engage_wall.take() {
-                engage_motor_rate =
-                    (motor_packets - motor_at_engage) as f64 / w.elapsed().as_secs_f64();
+            if let Some((w, t0)) = engage_wall.take() {
+                // per second of wall clock; in lock-step, of plant time
+                let dur = if args.lockstep {
+                    t - t0
+                } else {
+                    w.elapsed().as_secs_f64()
+                };
+                engage_motor_rate = (motor_packets - motor_at_engage) as f64 / dur;
             }
         }
 
@@ -508,7 +560,9 @@ pub fn run() -> Result<()> {
             plant.accelerometer()
         };
         let imu = imu_packet(acc / g, s.w_body_rad_s.map(f64::to_degrees));
-        let _ = sock.send_to(&imu, fw_addr);
+        if link.is_none() {
+            let _ = sock.send_to(&imu, fw_addr);
+        }
         let pose_now = k.is_multiple_of(10) && link_up;
         let setpoint_now = k % setpoint_every == 5 % setpoint_every && link_up;
         // cflib's packets: one per millisecond, and none in a millisecond that already carries a
@@ -594,17 +648,63 @@ pub fn run() -> Result<()> {
         }
         k += 1;
 
+        // Lock-step: the IMU packet last (the firmware's next tick), then wait for that tick.
+        if let Some(link) = &mut link {
+            let tick = link
+                .step(&imu)
+                .with_context(|| format!("plant t = {:.3} s", plant.t_s()))?;
+            let mut sh = shared.lock().unwrap();
+            if let Some(p) = tick.motor {
+                let drop = args.motor_drop > 0.0 && impair_rng.gen_bool(args.motor_drop.min(1.0));
+                let jitter = if args.motor_jitter_ms > 0 {
+                    impair_rng.gen_range(0..=args.motor_jitter_ms as u64)
+                } else {
+                    0
+                };
+                if drop {
+                    motor_dropped += 1;
+                } else {
+                    // reaches the plant at loop step k + delay (k: already the next step), never
+                    // before a command sent earlier
+                    let at = (k + args.motor_delay_ms as u64 + jitter)
+                        .max(motor_queue.back().map_or(0, |x| x.0));
+                    motor_queue.push_back((at, p));
+                }
+                sh.pwm = p;
+                sh.motor_packets += 1;
+                for b in (tick.tick as u64)
+                    .to_le_bytes()
+                    .into_iter()
+                    .chain(p.iter().flat_map(|m| m.to_le_bytes()))
+                {
+                    motor_digest = (motor_digest ^ b as u64).wrapping_mul(0x100_0000_01b3);
+                }
+            }
+            for d in &tick.other {
+                param_answer(d, &mut sh);
+            }
+            drop(sh);
+            if let (Some(lib), Some(a)) = (&lib_sock, *lib_addr.lock().unwrap()) {
+                for d in &tick.other {
+                    let _ = lib.send_to(d, a);
+                    relayed.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+
         // Pace: the next packet 1 ms after this one's deadline; never burst to catch up.
-        deadline += Duration::from_micros(1000);
-        let now = Instant::now();
-        if deadline > now {
-            thread::sleep(deadline - now);
-        } else {
-            let late = (now - deadline).as_secs_f64() * 1e3;
-            max_late_ms = max_late_ms.max(late);
-            if late > 20.0 {
-                deadline = now;
-                late_resets += 1;
+        if pace {
+            deadline += Duration::from_micros(1000);
+            let now = Instant::now();
+            if deadline > now {
+                thread::sleep(deadline - now);
+            } else {
+                let late = (now - deadline).as_secs_f64() * 1e3;
+                max_late_ms = max_late_ms.max(late);
+                if late > 20.0 {
+                    deadline = now;
+                    late_resets += 1;
+                }
             }
         }
     }
@@ -736,19 +836,36 @@ pub fn run() -> Result<()> {
             on_ground && airborne_once
         ),
     }
-    println!(
-        "timing: {:.3} s of plant in {wall:.3} s of wall clock ({:.4} plant s per wall s); IMU \
-         packets {k} ({:.1} /s); motor packets {motor_packets} ({:.1} /s overall, {engage_motor_rate:.1} /s \
-         in flight); max lateness {max_late_ms:.2} ms, {late_resets} pacing resets; CRTP relayed \
-         to cflib {}, from cflib {} (at most {} waiting)",
-        plant.t_s(),
-        plant.t_s() / wall,
-        k as f64 / wall,
-        motor_packets as f64 / wall,
-        relayed.load(Ordering::Relaxed),
-        cflib_sent,
-        from_cflib_max
-    );
+    if let Some(link) = &link {
+        println!(
+            "timing: lock-step{}: {:.3} s of plant in {wall:.3} s of wall clock ({:.3} plant s per \
+             wall s, {:.1} us of wall clock per tick); ticks {} = IMU packets {k}; motor packets \
+             {motor_packets} ({engage_motor_rate:.1} per plant s in flight), digest {motor_digest:016x}; \
+             CRTP relayed to cflib {}, from cflib {} (at most {} waiting)",
+            if args.realtime { " paced in real time" } else { "" },
+            plant.t_s(),
+            plant.t_s() / wall,
+            wall / k as f64 * 1e6,
+            link.ticks(),
+            relayed.load(Ordering::Relaxed),
+            cflib_sent,
+            from_cflib_max
+        );
+    } else {
+        println!(
+            "timing: {:.3} s of plant in {wall:.3} s of wall clock ({:.4} plant s per wall s); IMU \
+             packets {k} ({:.1} /s); motor packets {motor_packets} ({:.1} /s overall, {engage_motor_rate:.1} /s \
+             in flight); max lateness {max_late_ms:.2} ms, {late_resets} pacing resets; CRTP relayed \
+             to cflib {}, from cflib {} (at most {} waiting)",
+            plant.t_s(),
+            plant.t_s() / wall,
+            k as f64 / wall,
+            motor_packets as f64 / wall,
+            relayed.load(Ordering::Relaxed),
+            cflib_sent,
+            from_cflib_max
+        );
+    }
     println!(
         "motor packets in flight: largest gap {:.1} ms, {motor_gaps_4ms} gaps of 4 ms or more",
         motor_gap_max_s * 1e3
@@ -782,12 +899,23 @@ pub fn run() -> Result<()> {
             "peak_cm": cm(reset_peak_m),
             "back_within_1cm_after_s": reset_last_over_1cm.map(|e| e - tr),
         })),
+        "timing": if args.lockstep { "lockstep" } else { "wall-clock" },
+        "ticks": link.as_ref().map(|l| l.ticks()),
+        "motor_digest": link.as_ref().map(|_| format!("{motor_digest:016x}")),
         "plant_s_per_wall_s": plant.t_s() / wall,
         "max_late_ms": max_late_ms,
         "pacing_resets": late_resets,
         "motor_packets_per_s_in_flight": engage_motor_rate,
         "motor_gap_max_ms": motor_gap_max_s * 1e3,
         "motor_gaps_4ms": motor_gaps_4ms,
+        "motor_impairment": (args.motor_delay_ms > 0 || args.motor_jitter_ms > 0 || args.motor_drop > 0.0)
+            .then(|| serde_json::json!({
+                "delay_ms": args.motor_delay_ms,
+                "jitter_ms": args.motor_jitter_ms,
+                "drop": args.motor_drop,
+                "seed": args.seed,
+                "dropped": motor_dropped,
+            })),
     });
     host_train::io::write_json_atomic(&args.out.join("summary.json"), &summary)?;
     println!(

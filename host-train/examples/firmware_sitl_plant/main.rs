@@ -35,9 +35,14 @@
 //! Ground: the plant has no ground, so this program adds one: below z = 0 the vehicle rests at
 //! z = 0, level, still (the accelerometer then reads the normal force, 1 g up).
 //!
-//! Timing: not lock-stepped. The firmware's FreeRTOS ticks on a wall-clock timer, its stabilizer
-//! runs once per IMU packet, and this program paces the IMU stream at 1 kHz of wall clock (one
-//! plant millisecond per packet, never bursting to catch up). It reports how well it kept pace.
+//! Timing, two ways. Wall clock (the default): the firmware's FreeRTOS ticks on a wall-clock
+//! timer, its stabilizer runs once per IMU packet, and this program paces the IMU stream at 1 kHz
+//! of wall clock (one plant millisecond per packet, never bursting to catch up); it reports how
+//! well it kept pace. Lock-step (`--lockstep`, the firmware built with
+//! tools/firmware-sitl/patches/cf-lockstep.patch): the firmware's tick advances once per IMU
+//! packet; each millisecond this program sends the pose, setpoint and cflib packets due, then the
+//! IMU sample, waits for the firmware's tick-done packet (the motor packet of that tick, if any,
+//! came before it), and steps the plant 1 ms. Then a run is repeatable and faster than real time.
 //!
 //! Every other CRTP packet is relayed to a cflib client on `--cflib-port` (udp://127.0.0.1:19850),
 //! as smoke.py does, so cflib can watch the flight (or 0: no relay).
@@ -120,6 +125,34 @@ struct Args {
     /// error after it and the time back within 1 cm are reported.
     #[arg(long)]
     estimator_reset_s: Option<f64>,
+    /// Lock-step timing: the firmware (built with tools/firmware-sitl/patches/cf-lockstep.patch)
+    /// is run with CF2_LOCKSTEP=1 and its FreeRTOS tick advances once per IMU packet; after each
+    /// one this program waits for the firmware's tick-done packet, then steps the plant 1 ms. No
+    /// wall clock: a run is repeatable and as fast as the firmware computes.
+    #[arg(long)]
+    lockstep: bool,
+    /// With --lockstep: still pace the ticks at 1 kHz of wall clock (for a cflib client, whose
+    /// timeouts are wall-clock).
+    #[arg(long, requires = "lockstep")]
+    realtime: bool,
+    /// With --lockstep: seconds the firmware may take for one tick before the run fails.
+    #[arg(long, default_value_t = 10.0)]
+    tick_timeout_s: f64,
+    /// With --lockstep: the motor commands reach the plant this many milliseconds late (a
+    /// transport delay, repeatable; for studying the loop's timing margin).
+    #[arg(long, default_value_t = 0, requires = "lockstep")]
+    motor_delay_ms: u32,
+    /// With --lockstep: each motor command is further delayed by 0..=N ms, drawn per command
+    /// (`--seed`), order kept: the irregular delivery of a wall-clock run, repeatable.
+    #[arg(long, default_value_t = 0, requires = "lockstep")]
+    motor_jitter_ms: u32,
+    /// With --lockstep: the fraction of motor packets lost (the plant holds the last), drawn per
+    /// packet (`--seed`).
+    #[arg(long, default_value_t = 0.0, requires = "lockstep")]
+    motor_drop: f64,
+    /// Seed of --motor-jitter-ms and --motor-drop.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// Directory for flight.csv, flight.svg, console.log, summary.json.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,

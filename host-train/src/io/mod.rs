@@ -11,7 +11,8 @@
 //! [`parse_usd`] (`usdlog::parse`), [`ParseOptions`], [`UsdError`], [`UsdWriter`], [`Var`],
 //! [`VarType`], [`EventType`], [`crc32`], [`FIXED_FREQUENCY_ID`], [`LEE_COMMAND_VARS`],
 //! [`USD_STATE_VARS`], [`USD_ACC_VARS`]; the firmware link's packets ([`imu_packet`], [`parse_motor`],
-//! [`full_state_setpoint_packet`], [`CrtpSetpoint`], ...: the list below).
+//! [`full_state_setpoint_packet`], [`CrtpSetpoint`], ...: the list below), and its lock-step
+//! ([`CrtpLockstep`], [`CrtpTick`], [`parse_tick_done`], [`crtp_await_handshake`]).
 
 pub mod crtp;
 pub mod dataset;
@@ -20,6 +21,10 @@ pub mod flightlog;
 pub mod usdlog;
 
 // The layer's front door: what code outside host-train/src uses, by these names.
+pub use crtp::{
+    await_handshake as crtp_await_handshake, parse_tick_done, tick_done_packet,
+    Lockstep as CrtpLockstep, Tick as CrtpTick, CH_SIM_TICK_DONE as CRTP_CH_SIM_TICK_DONE,
+};
 pub use crtp::{
     ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header,
     hl_go_to_packet, hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet,
