@@ -40,6 +40,9 @@
  *     (0.05 m). Only then does the adaptation run (if `hamflight.adapt`), so that ground contact
  *     (the floor pushing back while thrust builds up) is never learned as a disturbance.
  *     supervisorIsFlying() alone is not enough: it turns true as soon as a motor spins over idle.
+ *   - Touch-down: airborne, with the vehicle and its setpoint both within airHeight of z_ground
+ *     (a landing), the adaptation is held (a kept, not learned), so that the floor pushing back
+ *     is not learned either.
  *   - LANDED: airborne and supervisorIsFlying() turned false (Bitcraze says so after 2 s of low
  *     thrust): a is reset, back to GROUND with z_ground := the estimated z.
  *
@@ -633,7 +636,16 @@ static HF_NOINLINE void updatePhase(const hf_state_t *s) {
     groundZ = s->p_m[2];
     hf_reset(&ctl);
   }
-  hf_set_adapt(&ctl, adaptOn && phase == HF_PHASE_AIRBORNE);
+}
+
+/* The adaptation runs while AIRBORNE, except on the way down to the ground: when both the
+ * vehicle and its setpoint are within airHeight of z_ground, the floor may push back (a
+ * landing's touch-down, before the supervisor says landed) and the estimate is held, as it is
+ * before the take-off. */
+static void updateAdaptation(const hf_state_t *s, const hf_setpoint_t *sp) {
+  const bool landing = s->p_m[2] - groundZ < airborneHeightM &&
+                       sp->p_m[2] - groundZ < airborneHeightM;
+  hf_set_adapt(&ctl, adaptOn && phase == HF_PHASE_AIRBORNE && !landing);
 }
 
 static HF_NOINLINE void updateLogs(void) {
@@ -728,6 +740,7 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   convertState(state, sensors, &hfState);
   updatePhase(&hfState);
   convertSetpoint(setpoint, &hfState, &hfSetpoint);
+  updateAdaptation(&hfState, &hfSetpoint);
 
   serveStep();
 

@@ -418,6 +418,11 @@ pub fn run() -> Result<()> {
                 let land_end = hold_end + args.land_s;
                 let hold_ref = |tau: f64| scenario.reference(tau.clamp(0.0, hold_s));
                 let top = hold_ref(hold_s).p_m;
+                // The descent comes to rest at the ground itself; a move to a point below it
+                // would still be braking (upward feed-forward) at touch-down and bounce the
+                // vehicle back up. Once down, the setpoint sinks below the ground so that the
+                // controller lets go.
+                let touch = Vector3::new(top.x, top.y, 0.0);
                 let bottom = Vector3::new(top.x, top.y, -0.05);
                 if te < args.takeoff_s {
                     let sp = smooth_move(ground_xy, target0.p_m, args.takeoff_s, te, yaw0);
@@ -425,7 +430,7 @@ pub fn run() -> Result<()> {
                 } else if te < hold_end {
                     ("hold", Some(hold_ref(te - args.takeoff_s)))
                 } else if te < land_end {
-                    let sp = smooth_move(top, bottom, args.land_s, te - hold_end, yaw0);
+                    let sp = smooth_move(top, touch, args.land_s, te - hold_end, yaw0);
                     ("land", Some(sp))
                 } else if te < land_end + 1.0 {
                     ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))

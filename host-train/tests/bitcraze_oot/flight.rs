@@ -190,7 +190,7 @@ fn velocity_reference_stays_on_the_leash() {
 }
 
 #[test]
-fn flight_phases_zero_output_ground_freeze_and_reset_after_landing() {
+fn flight_phases_zero_output_ground_freeze_touchdown_hold_and_reset_after_landing() {
     let mut shim = Shim::new();
     let ground = PlantState::at_rest(Vector3::new(0.2, -0.1, 0.0), 0.0);
     let hover_sp =
@@ -252,6 +252,31 @@ fn flight_phases_zero_output_ground_freeze_and_reset_after_landing() {
     shim.tick();
     shim.tick();
     assert_eq!(shim.param_u8("reset"), 0);
+
+    // Touch-down: still flying (the supervisor has not said landed), the setpoint at the ground
+    // and the vehicle on it, the floor pushing back: a is held, neither learned nor reset.
+    for _ in 0..100 {
+        shim.tick();
+    }
+    shim.set_setpoint([ABS; 4], [0.2, -0.1, -0.05], [0.0; 3], 0.0, 0.0, 0.0, false);
+    shim.set_state(&ground);
+    shim.tick();
+    shim.tick();
+    let held = shim.estimate();
+    assert!(held.iter().any(|v| *v != 0.0));
+    for _ in 0..300 {
+        shim.set_state(&ground);
+        shim.tick();
+    }
+    assert_eq!(shim.log_u8("phase"), 2, "still airborne for the supervisor");
+    assert_eq!(shim.estimate(), held, "held at touch-down");
+    // The setpoint high again (a go-around) with the vehicle still low: it learns again.
+    hover_sp(&mut shim);
+    for _ in 0..100 {
+        shim.set_state(&ground);
+        shim.tick();
+    }
+    assert_ne!(shim.estimate(), held, "learning again on a go-around");
 
     // Landed: the supervisor no longer says flying. a resets and stays frozen.
     for _ in 0..100 {
