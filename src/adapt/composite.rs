@@ -36,10 +36,9 @@ pub struct CompositeGains {
     /// passes through this lag before it is compared with the measurement. A lag τ the model
     /// does not know feeds the estimate's own rate back through the prediction (ε gains
     /// ≈ τ W ȧ), which destabilizes it once the estimator's bandwidth times the unmodelled lag
-    /// nears 1. Measured on paper-spiral-realistic: with 0 the composite law crashes on
-    /// RotorPy's 72 ms lag, with 35 ms it holds 0.34 cm there, with 50 ms 0.048 cm, and no
-    /// lag at all still flies 0.047 cm; the cost is a slower answer to a rotor fault
-    /// (rotor-loss-mid peak 1.2 → 2.3 cm).
+    /// nears 1. Assuming a lag the motors do not have costs little; missing one the motors have
+    /// can crash the law (RotorPy's 72 ms with 0 assumed). The cost of a longer assumed lag is a
+    /// slower answer to a rotor fault (docs/adaptation.md, the rotor-loss set).
     pub motor_tau_s: f32,
     /// How far the measurement lags the wrench that caused it besides the motors (s): the
     /// sensor's low-pass and the samples of delay in front of the law. The predicted thrust

@@ -20,20 +20,18 @@
 //!   to c_p `drive_max_m` and c_R `drive_max_rad` (direction kept, so the cancellation between
 //!   e_p and e_v during a transient survives; clipping e_p and e_v separately made `step` worse,
 //!   up to 13 cm), and a soft freeze that scales them by 1 / (1 + (‖e_p‖ / `soft_freeze_m`)²).
-//!   Measured on `step` with the gradient law they bring 0.51 cm down to 0.17–0.25 cm at best,
-//!   not the 0.05 cm asked, and cost paper-spiral (0.0355 → 0.039–0.10 cm): the tail of every
-//!   transient still winds the law, because a tracking error alone cannot tell a transient from
-//!   a disturbance.
+//!   They help `step` under the gradient law only partly and cost the smooth paths
+//!   (docs/adaptation.md): the tail of every transient still winds the law, because a tracking
+//!   error alone cannot tell a transient from a disturbance.
 //! - what does tell them apart is the **prediction error** of the composite law below: during a
-//!   transient the model predicts the measured force, so ε ≈ 0 and a stays put. With it `step`
-//!   holds 0.023 cm (`adaptive-composite`; 0.039 cm with the rebuilt weights). It is the
-//!   default law ([`AdaptationLaw::default`]) where it is compiled in.
+//!   transient the model predicts the measured force, so ε ≈ 0 and a stays put
+//!   (docs/adaptation.md's laws table has `step` under each law). It is the default law
+//!   ([`AdaptationLaw::default`]) where it is compiled in.
 //! - for the paper's gradient law, the answer is at the source of the transient: the
 //!   **setpoint shaping** of [`crate::shaping`] (a reference model, as model-reference adaptive
 //!   control has it) turns a setpoint jump into a motion the vehicle can fly, and the tracking
-//!   term is frozen while the shaped setpoint is more than 2 cm from the raw one. `step`: 0.51 →
-//!   0.030 cm (0.024 cm with the rebuilt weights); smooth trajectories are untouched
-//!   (paper-spiral bit for bit).
+//!   term is frozen while the shaped setpoint is more than 2 cm from the raw one; smooth
+//!   trajectories are untouched (paper-spiral bit for bit; `step`: docs/adaptation.md).
 //! - and the **normalized gradient** ([`AdaptationRates::normalized`], default on): the law's
 //!   loop gain grows as ‖W‖², so features far larger than nominal (a badly scaled trained model,
 //!   or the ×5 of the wrong-features test) made it unstable (paper-spiral crashed at 1.3 s).
