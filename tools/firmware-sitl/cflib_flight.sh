@@ -53,8 +53,15 @@ cfx() { # log_file args...
     return 1
 }
 
+# Lock-step, paced at 1 kHz of wall clock for cflib's timeouts (CFLIB_TIMING=wall-clock: the
+# firmware's own timer instead).
+case "${CFLIB_TIMING:-lockstep}" in
+    lockstep) timing=(--lockstep --realtime) ;;
+    wall-clock) timing=() ;;
+    *) echo "cflib_flight.sh: CFLIB_TIMING is lockstep or wall-clock" >&2; exit 2 ;;
+esac
 (cd "$root" && exec "$plant" --firmware "$fw" --scenario scenarios/hover.toml --hold-s 60 --linger-s 15 \
-    --out "$out/flight" >"$out/plant.log" 2>&1) &
+    "${timing[@]}" --out "$out/flight" >"$out/plant.log" 2>&1) &
 plant_pid=$!
 trap 'kill $plant_pid 2>/dev/null || true' EXIT
 for _ in $(seq 100); do
