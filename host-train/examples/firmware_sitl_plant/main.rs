@@ -44,6 +44,11 @@
 //! IMU sample, waits for the firmware's tick-done packet (the motor packet of that tick, if any,
 //! came before it), and steps the plant 1 ms. Then a run is repeatable and faster than real time.
 //!
+//! Pilots (`--pilot`): the streamed setpoints above; the firmware's high-level commander
+//! (take-off, go-to, land, stop); or the commander flying a figure of eight uploaded to its
+//! trajectory memory (`trajectory.rs`: the memory TOC, acknowledged writes of poly4d pieces,
+//! define, start relative to the hover point), scored against the trajectory's own polynomial.
+//!
 //! Every other CRTP packet is relayed to a cflib client on `--cflib-port` (udp://127.0.0.1:19850),
 //! as smoke.py does, so cflib can watch the flight (or 0: no relay).
 //!
