@@ -782,7 +782,7 @@ pub fn run() -> Result<()> {
                     (Some((_, e)), _) => {
                         bail!("start_trajectory refused by the firmware (error {e})")
                     }
-                    (None, Some((_, n))) if n >= 3 => {
+                    (None, Some((t0, n))) if n >= 3 && t - t0 >= 0.1 => {
                         bail!("start_trajectory not answered after 3 sends 100 ms apart")
                     }
                     (None, Some((t0, n))) if t - t0 >= 0.1 => {
