@@ -7,6 +7,8 @@
 #   - the scenarios of tools/bitcraze-loop's table (cf-hover-lag50, cf-calm-spiral,
 #     cf-paper-spiral, cf-rotor-loss, cf-hover-wind, gust-spiral);
 #   - a hover flown by the firmware's high-level commander (take-off, go-to, land, stop);
+#   - a figure of eight uploaded to the high-level commander's trajectory memory and flown by it
+#     (--pilot trajectory: 10 poly4d pieces, 10 s, relative to the hover point);
 #   - a lost radio link 5 s into a hover (setpoints and pose stop);
 #   - an estimator reset 5 s into a hover (kalman.resetEstimation = 1 over CRTP);
 # and prints a markdown table (also OUT_DIR/table.md), each flight's files in OUT_DIR/<name>/.
@@ -18,7 +20,7 @@
 set -euo pipefail
 
 usage() {
-    sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
     echo
     echo "usage: $(basename "$0") FIRMWARE_CHECKOUT [OUT_DIR]   (default OUT_DIR: target/firmware-sitl/study)"
 }
@@ -52,12 +54,13 @@ fly() { # name scenario [extra args]
         echo "   FAILED (exit $?): $out/$name.log" >&2
         failed=1
     fi
-    grep -E "hold, from|CRASHED|link lost|estimator reset" "$out/$name.log" | sed 's/^/   /' || true
+    grep -E "hold, from|trajectory \(vs|CRASHED|link lost|estimator reset" "$out/$name.log" | sed 's/^/   /' || true
 }
 for s in cf-hover-lag50 cf-calm-spiral cf-paper-spiral cf-rotor-loss cf-hover-wind gust-spiral; do
     fly "$s" "$s"
 done
 fly high-level hover --pilot high-level
+fly trajectory hover --pilot trajectory
 fly link-loss hover --link-loss-s 5
 fly estimator-reset hover --estimator-reset-s 5
 
@@ -88,6 +91,14 @@ j = load("high-level")
 if j:
     print(f"The high-level commander (take-off, go-to, land, stop, no streamed setpoint): hover RMSE "
           f"{num(j['hold_rmse_cm'])} cm from 5 s into the hold, touch-down at {num(j['touchdown_m_s'])} m/s, "
+          f"crashed: {j['crashed'] or 'no'}.")
+j = load("trajectory")
+if j and j.get("trajectory"):
+    t = j["trajectory"]
+    print(f"An uploaded trajectory (a {t['size_m'][0]:.1f} × {t['size_m'][1]:.1f} m figure of eight, "
+          f"{t['pieces']} poly4d pieces, {t['duration_s']:.0f} s, {t['writes']} memory writes, "
+          f"{t['repeats']} repeated) flown by the high-level commander: RMSE {num(t['rmse_cm'])} cm "
+          f"against its polynomial (max {num(t['max_cm'])}), touch-down at {num(j['touchdown_m_s'])} m/s, "
           f"crashed: {j['crashed'] or 'no'}.")
 j = load("link-loss")
 if j and j.get("link_loss"):

@@ -6,7 +6,9 @@ use std::process::Child;
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use host_train::io::{parse_param_answer, ParamAnswer};
+use host_train::io::{
+    parse_crtp_mem_answer, parse_hl_answer, parse_param_answer, CrtpMemAnswer, ParamAnswer,
+};
 
 /// What the firmware sends us, shared between the receiving thread and the loop.
 #[derive(Default)]
@@ -24,6 +26,14 @@ pub struct FromFirmware {
     pub from_cflib: std::collections::VecDeque<Vec<u8>>,
     /// The longest that wait has been (packets).
     pub from_cflib_max: usize,
+    /// The memory TOC: the number of memories, once answered.
+    pub mem_count: Option<u8>,
+    /// Memory infos answered: (id, (type, size) or none past the end).
+    pub mem_info: Vec<(u8, Option<(u8, u32)>)>,
+    /// Memory writes answered: (memory id, address, status).
+    pub mem_written: Vec<(u8, u32, u8)>,
+    /// The high-level commander's answers, in order: (command, result).
+    pub hl_answers: Vec<(u8, u8)>,
 }
 
 /// The firmware's console, line by line, into a file and a flag for the stabilizer loop.
@@ -68,8 +78,25 @@ impl Drop for Firmware {
     }
 }
 
-/// Parameter answers into `sh`: TOC items and write echoes.
+/// Parameter answers into `sh`: TOC items and write echoes; and the memory port's and the
+/// high-level commander's answers.
 pub fn param_answer(d: &[u8], sh: &mut FromFirmware) {
+    if let Some(a) = parse_hl_answer(d) {
+        sh.hl_answers.push(a);
+        return;
+    }
+    match parse_crtp_mem_answer(d) {
+        Some(CrtpMemAnswer::Count(n)) => sh.mem_count = Some(n),
+        Some(CrtpMemAnswer::Info { id, kind_size }) => {
+            if !sh.mem_info.iter().any(|x| x.0 == id) {
+                sh.mem_info.push((id, kind_size));
+            }
+        }
+        Some(CrtpMemAnswer::Written { id, addr, status }) => {
+            sh.mem_written.push((id, addr, status))
+        }
+        Some(CrtpMemAnswer::Read { .. }) | None => {}
+    }
     match parse_param_answer(d) {
         Some(ParamAnswer::TocEnd) => sh.param_toc_end = true,
         Some(ParamAnswer::TocItem { id, name, .. })

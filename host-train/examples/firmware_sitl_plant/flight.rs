@@ -15,9 +15,10 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use host_train::io::{
     crtp_await_handshake, ext_pose_packet, full_state_setpoint_packet, hl_go_to_packet,
-    hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, param_toc_request,
-    param_write_float, param_write_u8, parse_motor, position_setpoint_packet, pwm_to_rpm,
-    stop_setpoint_packet, CrtpLockstep, CRTP_HANDSHAKE, CRTP_PORT_SIM,
+    hl_land_packet, hl_start_trajectory_packet, hl_stop_packet, hl_takeoff_packet, imu_packet,
+    param_toc_request, param_write_float, param_write_u8, parse_motor, poly4d_trajectory_eval,
+    position_setpoint_packet, pwm_to_rpm, stop_setpoint_packet, CrtpLockstep, Poly4d,
+    CRTP_HANDSHAKE, CRTP_PORT_SIM,
 };
 use host_train::{Plant, PlantState, Scenario, TrajectoryPoint};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
@@ -25,6 +26,7 @@ use rand::{Rng, SeedableRng};
 
 use crate::crtp::{param_answer, Console, Firmware, FromFirmware};
 use crate::record::{plot, write_csv, Sample};
+use crate::trajectory::{figure_eight, figure_eight_pieces, Upload, HL_CMD_START_TRAJECTORY};
 use crate::{Args, Pilot, SetpointKind};
 
 /// Smooth 0 → 1 over [0, 1] (zero velocity at both ends), with its first and second derivatives.
@@ -83,6 +85,76 @@ pub fn run() -> Result<()> {
     let target0 = scenario.reference(0.0);
     let yaw0 = target0.yaw_rad;
     let ground_xy = Vector3::new(target0.p_m.x, target0.p_m.y, 0.0);
+
+    // --pilot trajectory: the figure of eight's pieces, flown relative to p*(0).
+    let traj_pieces: Vec<Poly4d> = if args.pilot == Pilot::Trajectory {
+        if !(args.traj_time_scale > 0.0 && args.traj_s > 0.0 && args.upload_s > 0.0) {
+            bail!("--traj-s, --traj-time-scale and --upload-s must be positive");
+        }
+        figure_eight_pieces(
+            args.traj_size_m,
+            args.traj_s,
+            args.traj_pieces as usize,
+            yaw0,
+        )
+    } else {
+        Vec::new()
+    };
+    let traj_scale = args.traj_time_scale;
+    // The reference of the started trajectory, `tau_s` after its start: the pieces' polynomial
+    // at tau / scale, shifted so that it starts at p*(0) (the commander's `relative`: its
+    // current setpoint, here the go-to's end, p*(0)).
+    let traj_ref = |tau_s: f64| -> TrajectoryPoint {
+        let e0 = poly4d_trajectory_eval(&traj_pieces, 0.0).expect("pieces");
+        let e = poly4d_trajectory_eval(&traj_pieces, tau_s / traj_scale).expect("pieces");
+        TrajectoryPoint {
+            p_m: target0.p_m + e.p_m - e0.p_m,
+            v_m_s: e.v_m_s / traj_scale,
+            a_m_s2: e.a_m_s2 / (traj_scale * traj_scale),
+            j_m_s3: Vector3::zeros(),
+            yaw_rad: e.yaw_rad,
+            yaw_rate_rad_s: e.yaw_rate_rad_s / traj_scale,
+        }
+    };
+    let traj_total_s: f64 =
+        traj_pieces.iter().map(|p| p.duration_s as f64).sum::<f64>() * traj_scale;
+    // After the trajectory's end: its end point, held this long before the landing.
+    const TRAJ_TAIL_S: f64 = 1.0;
+    let mut upload = if traj_pieces.is_empty() {
+        None
+    } else {
+        let up = Upload::new(&traj_pieces, 0)?;
+        // how closely the f32 pieces follow the analytic figure, and the figure's peak speed
+        let (mut fit_max, mut v_max) = (0.0f64, 0.0f64);
+        for i in 0..=10_000 {
+            let tau = args.traj_s * i as f64 / 10_000.0;
+            let e = poly4d_trajectory_eval(&traj_pieces, tau).expect("pieces");
+            let f = figure_eight(args.traj_size_m, args.traj_s, tau);
+            let fp = Vector3::new(f[0][0], f[1][0], f[2][0]);
+            fit_max = fit_max.max((e.p_m - fp).norm());
+            v_max = v_max.max(e.v_m_s.norm());
+        }
+        println!(
+            "trajectory: figure of eight {:.2} x {:.2} m in {} s, {} poly4d pieces, {} B in {} \
+             memory writes; the pieces within {:.3} mm of the figure; peak speed {:.2} m/s \
+             (time scale {traj_scale})",
+            2.0 * args.traj_size_m,
+            args.traj_size_m,
+            args.traj_s,
+            traj_pieces.len(),
+            up.bytes(),
+            up.bytes().div_ceil(host_train::io::CRTP_MEM_CHUNK),
+            fit_max * 1e3,
+            v_max / traj_scale
+        );
+        Some(up)
+    };
+    // The upload's end, the start_trajectory sends (plant time of the last, how many) and its
+    // answer.
+    let mut upload_done_at: Option<f64> = None;
+    let mut upload_began_at: Option<f64> = None;
+    let mut traj_start: Option<(f64, u32)> = None;
+    let mut traj_start_answered: Option<f64> = None;
 
     let mut plant: Plant = scenario.plant();
     plant.set_state(PlantState::at_rest(ground_xy, yaw0));
@@ -315,8 +387,14 @@ pub fn run() -> Result<()> {
     let mut link_lost_at: Option<f64> = None;
     let mut motors_off_at: Option<f64> = None;
     let setpoint_every = ((1000.0 / args.setpoint_hz).round() as u64).max(1);
-    let total_guard_s =
-        60.0 + args.settle_s + args.takeoff_s + hold_s + args.land_s + args.linger_s;
+    let total_guard_s = 60.0
+        + args.settle_s
+        + args.takeoff_s
+        + hold_s
+        + args.land_s
+        + args.linger_s
+        + args.upload_s
+        + traj_total_s;
     loop {
         let t = plant.t_s();
         let (mut pwm, motor_packets) = {
@@ -412,6 +490,36 @@ pub fn run() -> Result<()> {
         let (phase, setpoint): (&'static str, Option<TrajectoryPoint>) = match engage_at {
             None if stab_started_at.is_none() => ("boot", None),
             None => ("settle", None),
+            Some(t_engage) if args.pilot == Pilot::Trajectory => {
+                // take-off, hover at p*(0) while the trajectory is uploaded, the trajectory,
+                // its end point held, the landing there, the stop
+                let te = t - t_engage;
+                let up_end = args.takeoff_s + args.upload_s;
+                let tr_end = up_end + traj_total_s + TRAJ_TAIL_S;
+                let land_end = tr_end + args.land_s;
+                let top = traj_ref(traj_total_s).p_m;
+                let touch = Vector3::new(top.x, top.y, 0.0);
+                let bottom = Vector3::new(top.x, top.y, -0.05);
+                if te < args.takeoff_s {
+                    let sp = smooth_move(ground_xy, target0.p_m, args.takeoff_s, te, yaw0);
+                    ("takeoff", Some(sp))
+                } else if te < up_end {
+                    let sp = smooth_move(target0.p_m, target0.p_m, 1.0, 0.0, yaw0);
+                    ("upload", Some(sp))
+                } else if te < tr_end {
+                    let t0 = traj_start.map_or(t, |s| s.0);
+                    ("trajectory", Some(traj_ref(t - t0)))
+                } else if te < land_end {
+                    let sp = smooth_move(top, touch, args.land_s, te - tr_end, yaw0);
+                    ("land", Some(sp))
+                } else if te < land_end + 1.0 {
+                    ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
+                } else if te < land_end + 2.0 + args.linger_s {
+                    ("stop", None)
+                } else {
+                    break;
+                }
+            }
             Some(t_engage) => {
                 let te = t - t_engage;
                 let hold_end = args.takeoff_s + hold_s;
@@ -441,7 +549,7 @@ pub fn run() -> Result<()> {
                 }
             }
         };
-        if phase == "hold" && hold_started_at.is_none() {
+        if (phase == "hold" || phase == "trajectory") && hold_started_at.is_none() {
             hold_started_at = Some(t);
             delay_disturbances(&mut plant, t);
         }
@@ -574,7 +682,33 @@ pub fn run() -> Result<()> {
         // pose or a setpoint. The firmware's socket link queues 5 packets and drops the rest, its
         // reader runs about once per tick, and cflib's UDP driver never resends: one packet lost
         // stalls a parameter download or a memory write for good.
-        if !pose_now && !setpoint_now && link_up {
+        // The trajectory's upload: one packet per millisecond in the same slots, before cflib's.
+        let mut upload_pk = None;
+        if let (Some(up), "upload", true) = (&mut upload, phase, link_up) {
+            upload_began_at.get_or_insert(t);
+            if !pose_now && !setpoint_now {
+                let sh = shared.lock().unwrap();
+                upload_pk = up
+                    .next_packet(k, &sh)
+                    .with_context(|| format!("plant t = {t:.3} s"))?;
+            }
+            if up.done() && upload_done_at.is_none() {
+                upload_done_at = Some(t);
+                println!(
+                    "[{:6.2} s] trajectory uploaded to memory {} ({} B, {} writes, {} packets of \
+                     which {} repeats) and defined, plant t = {t:.3} s",
+                    t_start.elapsed().as_secs_f64(),
+                    up.mem_id.unwrap_or(0),
+                    up.bytes(),
+                    up.writes(),
+                    up.packets,
+                    up.repeats
+                );
+            }
+        }
+        if let Some(pk) = &upload_pk {
+            let _ = sock.send_to(pk, fw_addr);
+        } else if !pose_now && !setpoint_now && link_up {
             let next = shared.lock().unwrap().from_cflib.pop_front();
             if let Some(pk) = next {
                 let _ = sock.send_to(&pk, fw_addr);
@@ -601,6 +735,66 @@ pub fn run() -> Result<()> {
             if let (Some(pk), true) = (pk, hl_phase.1 < 3) {
                 let _ = sock.send_to(&pk, fw_addr);
                 hl_phase.1 += 1;
+            }
+        }
+        if args.pilot == Pilot::Trajectory && link_up {
+            if setpoint_now {
+                // each phase's command three times, as the high-level pilot does
+                if hl_phase.0 != phase {
+                    hl_phase = (phase, 0);
+                }
+                let pk = match phase {
+                    "takeoff" => Some(hl_takeoff_packet(target0.p_m.z, yaw0, args.takeoff_s)),
+                    "upload" => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
+                    "land" => Some(hl_land_packet(0.0, yaw0, args.land_s)),
+                    "stop" => Some(hl_stop_packet()),
+                    _ => None,
+                };
+                if let (Some(pk), true) = (pk, hl_phase.1 < 3) {
+                    let _ = sock.send_to(&pk, fw_addr);
+                    hl_phase.1 += 1;
+                }
+            }
+            if phase == "trajectory" {
+                if let Some(up) = &upload {
+                    if !up.done() {
+                        bail!(
+                            "the trajectory upload did not finish within --upload-s {} s \
+                             (plant t = {t:.3} s): {}",
+                            args.upload_s,
+                            up.status()
+                        );
+                    }
+                }
+                // start_trajectory once (a repeat would restart it), relative to the hover
+                // point; its answer within 100 ms, else sent again (up to three times)
+                let answer = shared
+                    .lock()
+                    .unwrap()
+                    .hl_answers
+                    .iter()
+                    .find(|a| a.0 == HL_CMD_START_TRAJECTORY)
+                    .copied();
+                match (answer, traj_start) {
+                    (Some((_, 0)), _) => {
+                        traj_start_answered.get_or_insert(t);
+                    }
+                    (Some((_, e)), _) => {
+                        bail!("start_trajectory refused by the firmware (error {e})")
+                    }
+                    (None, Some((t0, n))) if n >= 3 && t - t0 >= 0.1 => {
+                        bail!("start_trajectory not answered after 3 sends 100 ms apart")
+                    }
+                    (None, Some((t0, n))) if t - t0 >= 0.1 => {
+                        traj_start = Some((t, n + 1));
+                    }
+                    (None, None) => traj_start = Some((t, 1)),
+                    (None, Some(_)) => {}
+                }
+                if traj_start.is_some_and(|s| s.0 == t) {
+                    let pk = hl_start_trajectory_packet(0, traj_scale as f32, true, false);
+                    let _ = sock.send_to(&pk, fw_addr);
+                }
             }
         }
         if setpoint_now && args.pilot == Pilot::Stream {
@@ -790,6 +984,30 @@ pub fn run() -> Result<()> {
         stats(&|s| s.phase == "hold" && s.t_s >= hold_t0 + args.window_s),
     );
     report("landing", stats(&|s| s.phase == "land"));
+    let traj_stats = stats(&|s| s.phase == "trajectory");
+    if let Some(up) = &upload {
+        report("hover while uploading", stats(&|s| s.phase == "upload"));
+        report("trajectory (vs its polynomial)", traj_stats);
+        println!(
+            "trajectory upload: memory id {} ({} B), {} B in {} writes, {} packets ({} repeats), \
+             done {} after the hover began; start_trajectory sent at plant t = {}, answered {}",
+            up.mem_id.map_or("-".into(), |i| i.to_string()),
+            up.mem_size,
+            up.bytes(),
+            up.writes(),
+            up.packets,
+            up.repeats,
+            match (upload_done_at, upload_began_at) {
+                (Some(d), Some(b)) => format!("{:.0} ms", (d - b) * 1e3),
+                _ => "NEVER".into(),
+            },
+            traj_start.map_or("-".into(), |s| format!("{:.3} s ({} sends)", s.0, s.1)),
+            match (traj_start_answered, traj_start) {
+                (Some(a), Some(s)) => format!("{:.0} ms later", (a - s.0) * 1e3),
+                _ => "NEVER".into(),
+            }
+        );
+    }
     let hold: Vec<&Sample> = samples.iter().filter(|s| s.phase == "hold").collect();
     if let Some(last) = hold.last() {
         let mean_z = hold.iter().map(|s| s.p.z).sum::<f64>() / hold.len() as f64;
@@ -888,6 +1106,25 @@ pub fn run() -> Result<()> {
         "hold_max_cm": settled.map(|x| cm(x.1)),
         "takeoff_rmse_cm": stats(&|s| s.phase == "takeoff").map(|x| cm(x.0)),
         "landing_rmse_cm": stats(&|s| s.phase == "land").map(|x| cm(x.0)),
+        "pilot": format!("{:?}", args.pilot),
+        "trajectory": upload.as_ref().map(|up| serde_json::json!({
+            "shape": "figure of eight",
+            "size_m": [2.0 * args.traj_size_m, args.traj_size_m],
+            "duration_s": traj_total_s,
+            "time_scale": traj_scale,
+            "pieces": traj_pieces.len(),
+            "bytes": up.bytes(),
+            "mem_id": up.mem_id,
+            "writes": up.writes(),
+            "packets": up.packets,
+            "repeats": up.repeats,
+            "upload_ms": upload_done_at.zip(upload_began_at).map(|(d, b)| (d - b) * 1e3),
+            "started_at_s": traj_start.map(|s| s.0),
+            "start_answered": traj_start_answered.is_some(),
+            "rmse_cm": traj_stats.map(|x| cm(x.0)),
+            "max_cm": traj_stats.map(|x| cm(x.1)),
+            "rmse_z_cm": traj_stats.map(|x| cm(x.2)),
+        })),
         "touchdown_m_s": touchdown_speed,
         "crashed": crash.as_ref().map(|(t, why)| format!("at {t:.2} s: {why}")),
         "airborne": airborne_once,

@@ -44,6 +44,11 @@
 //! IMU sample, waits for the firmware's tick-done packet (the motor packet of that tick, if any,
 //! came before it), and steps the plant 1 ms. Then a run is repeatable and faster than real time.
 //!
+//! Pilots (`--pilot`): the streamed setpoints above; the firmware's high-level commander
+//! (take-off, go-to, land, stop); or the commander flying a figure of eight uploaded to its
+//! trajectory memory (`trajectory.rs`: the memory TOC, acknowledged writes of poly4d pieces,
+//! define, start relative to the hover point), scored against the trajectory's own polynomial.
+//!
 //! Every other CRTP packet is relayed to a cflib client on `--cflib-port` (udp://127.0.0.1:19850),
 //! as smoke.py does, so cflib can watch the flight (or 0: no relay).
 //!
@@ -58,6 +63,7 @@ use clap::Parser;
 mod crtp;
 mod flight;
 mod record;
+mod trajectory;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -103,9 +109,27 @@ struct Args {
     /// Who flies: `stream` (cflib's streamed setpoints along the scenario's reference, `--setpoint`)
     /// or `high-level` (the firmware's high-level commander, as cflib's `HighLevelCommander`: take-off
     /// to p*(0)'s height, go-to p*(0), land, stop; the scenario's reference is then only the score's
-    /// yardstick: use a hover scenario).
+    /// yardstick: use a hover scenario), or `trajectory` (the high-level commander flies an
+    /// uploaded figure of eight from p*(0): `--traj-*`, `--upload-s`; use a hover scenario).
     #[arg(long, value_enum, default_value_t = Pilot::Stream)]
     pilot: Pilot,
+    /// With `--pilot trajectory`: the figure of eight's duration (s).
+    #[arg(long, default_value_t = 10.0)]
+    traj_s: f64,
+    /// With `--pilot trajectory`: the figure's half-width along x (m; along y half of it).
+    #[arg(long, default_value_t = 0.5)]
+    traj_size_m: f64,
+    /// With `--pilot trajectory`: poly4d pieces of the figure (1..=31, the memory's room).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u8).range(1..=31))]
+    traj_pieces: u8,
+    /// With `--pilot trajectory`: start_trajectory's time scale (1: as uploaded, 2: twice as long).
+    #[arg(long, default_value_t = 1.0)]
+    traj_time_scale: f64,
+    /// With `--pilot trajectory`: seconds of hover after the take-off in which the trajectory is
+    /// uploaded and defined (the flight fails if the firmware has not answered every write and
+    /// the definition by then), before it is started.
+    #[arg(long, default_value_t = 2.0)]
+    upload_s: f64,
     /// Setpoints per second (cflib users stream 10–100 Hz).
     #[arg(long, default_value_t = 100.0, value_parser = positive_hz)]
     setpoint_hz: f64,
@@ -165,6 +189,10 @@ pub enum Pilot {
     Stream,
     /// The firmware's high-level commander plans them from take-off, go-to and land commands.
     HighLevel,
+    /// The high-level commander flies an uploaded trajectory: take-off, go-to p*(0), upload a
+    /// figure of eight (poly4d pieces) to its trajectory memory, define it, start it relative
+    /// to the hover point, land, stop. Scored against the trajectory's own polynomial.
+    Trajectory,
 }
 
 /// The setpoint type streamed over the generic commander.

@@ -12,7 +12,10 @@
 //! [`VarType`], [`EventType`], [`crc32`], [`FIXED_FREQUENCY_ID`], [`LEE_COMMAND_VARS`],
 //! [`USD_STATE_VARS`], [`USD_ACC_VARS`]; the firmware link's packets ([`imu_packet`], [`parse_motor`],
 //! [`full_state_setpoint_packet`], [`CrtpSetpoint`], ...: the list below), and its lock-step
-//! ([`CrtpLockstep`], [`CrtpTick`], [`parse_tick_done`], [`crtp_await_handshake`]).
+//! ([`CrtpLockstep`], [`CrtpTick`], [`parse_tick_done`], [`crtp_await_handshake`]); the
+//! high-level commander's uploaded trajectories ([`Poly4d`], [`poly4d_trajectory_eval`],
+//! [`crtp_mem_write_packets`], [`parse_crtp_mem_answer`], [`hl_define_trajectory_packet`],
+//! [`hl_start_trajectory_packet`], [`parse_hl_answer`], ...).
 
 pub mod crtp;
 pub mod dataset;
@@ -36,6 +39,17 @@ pub use crtp::{
     PORT_COMMANDER_GENERIC as CRTP_PORT_COMMANDER_GENERIC,
     PORT_LOCALIZATION as CRTP_PORT_LOCALIZATION, PORT_PARAM as CRTP_PORT_PARAM,
     PORT_SETPOINT_HL as CRTP_PORT_SETPOINT_HL, PORT_SIM as CRTP_PORT_SIM,
+};
+// The high-level commander's uploaded trajectories: the memory port and the poly4d pieces.
+pub use crtp::{
+    hl_define_trajectory_packet, hl_start_trajectory_packet,
+    mem_count_request as crtp_mem_count_request, mem_info_request as crtp_mem_info_request,
+    mem_read_request as crtp_mem_read_request, mem_write_packet as crtp_mem_write_packet,
+    mem_write_packets as crtp_mem_write_packets, parse_hl_answer,
+    parse_mem_answer as parse_crtp_mem_answer, poly4d_trajectory_eval, MemAnswer as CrtpMemAnswer,
+    Poly4d, PolyEval as Poly4dEval, HL_TRAJECTORY_IDS, MEM_CHUNK as CRTP_MEM_CHUNK,
+    MEM_TYPE_TRAJ as CRTP_MEM_TYPE_TRAJ, POLY4D_BYTES, PORT_MEM as CRTP_PORT_MEM,
+    TRAJECTORY_MEMORY_BYTES,
 };
 pub use dataset::{
     load as load_dataset, load_manifest as load_dataset_manifest, realization_file,
