@@ -301,11 +301,9 @@ struct StubLog {
     params: Vec<(u16, f32)>,
 }
 
-/// The firmware's side: the handshake as `socketlink.c` does it (send the handshake byte until
-/// it comes back), then per IMU sample one motor packet. Its controller is a plain altitude loop
-/// on the external pose and the full-state setpoint (equal rotor forces, through the power
-/// distribution's force → PWM map): not the point, only enough to close the loop.
-fn stub_firmware(plant_addr: SocketAddr, mass_kg: f64, g: f64) -> StubLog {
+/// The firmware's socket after the handshake, as `socketlink.c` does it: the handshake byte sent
+/// until it comes back.
+fn stub_handshake(plant_addr: SocketAddr) -> UdpSocket {
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     sock.set_read_timeout(Some(Duration::from_millis(50)))
         .unwrap();
@@ -319,6 +317,16 @@ fn stub_firmware(plant_addr: SocketAddr, mass_kg: f64, g: f64) -> StubLog {
         }
     }
     sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    sock
+}
+
+/// The firmware's side: the handshake as `socketlink.c` does it (send the handshake byte until
+/// it comes back), then per IMU sample one motor packet. Its controller is a plain altitude loop
+/// on the external pose and the full-state setpoint (equal rotor forces, through the power
+/// distribution's force → PWM map): not the point, only enough to close the loop.
+fn stub_firmware(plant_addr: SocketAddr, mass_kg: f64, g: f64) -> StubLog {
+    let sock = stub_handshake(plant_addr);
+    let mut buf = [0u8; 64];
     let mut log = StubLog::default();
     let (mut z, mut z_prev, mut vz) = (0.0, f64::NAN, 0.0);
     let mut z_ref = (0.0, 0.0);
@@ -526,19 +534,8 @@ fn lockstep_stub(
     skip_every: u32,
     tick_done: bool,
 ) -> LockstepStubLog {
-    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sock.set_read_timeout(Some(Duration::from_millis(50)))
-        .unwrap();
+    let sock = stub_handshake(plant_addr);
     let mut buf = [0u8; 64];
-    loop {
-        sock.send_to(&[CRTP_HANDSHAKE], plant_addr).unwrap();
-        if let Ok((1, _)) = sock.recv_from(&mut buf) {
-            if buf[0] == CRTP_HANDSHAKE {
-                break;
-            }
-        }
-    }
-    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
     let mut log = LockstepStubLog::default();
     let (mut z, mut vz, mut z_ref) = (f64::NAN, 0.0, (0.0, 0.0));
     while let Ok((n, _)) = sock.recv_from(&mut buf) {

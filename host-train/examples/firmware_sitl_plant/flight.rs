@@ -719,15 +719,21 @@ pub fn run() -> Result<()> {
             let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(s.rot));
             let _ = sock.send_to(&ext_pose_packet(&s.p_m, &q), fw_addr);
         }
-        if setpoint_now && args.pilot == Pilot::HighLevel {
-            // The high-level commander flies its own plan: each phase's command three times (a
-            // command is not acknowledged, and a repeat 10 ms later changes nothing).
+        // The high-level commander flies its own plan: each phase's command three times (a
+        // command is not acknowledged, and a repeat 10 ms later changes nothing). The phase
+        // that holds the hover point: the high-level pilot's hold, the trajectory pilot's upload.
+        let hl_hold_phase = match args.pilot {
+            Pilot::HighLevel => Some("hold"),
+            Pilot::Trajectory if link_up => Some("upload"),
+            _ => None,
+        };
+        if let (true, Some(hold_phase)) = (setpoint_now, hl_hold_phase) {
             if hl_phase.0 != phase {
                 hl_phase = (phase, 0);
             }
             let pk = match phase {
                 "takeoff" => Some(hl_takeoff_packet(target0.p_m.z, yaw0, args.takeoff_s)),
-                "hold" => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
+                p if p == hold_phase => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
                 "land" => Some(hl_land_packet(0.0, yaw0, args.land_s)),
                 "stop" => Some(hl_stop_packet()),
                 _ => None,
@@ -737,64 +743,45 @@ pub fn run() -> Result<()> {
                 hl_phase.1 += 1;
             }
         }
-        if args.pilot == Pilot::Trajectory && link_up {
-            if setpoint_now {
-                // each phase's command three times, as the high-level pilot does
-                if hl_phase.0 != phase {
-                    hl_phase = (phase, 0);
-                }
-                let pk = match phase {
-                    "takeoff" => Some(hl_takeoff_packet(target0.p_m.z, yaw0, args.takeoff_s)),
-                    "upload" => Some(hl_go_to_packet(&target0.p_m, yaw0, 1.0)),
-                    "land" => Some(hl_land_packet(0.0, yaw0, args.land_s)),
-                    "stop" => Some(hl_stop_packet()),
-                    _ => None,
-                };
-                if let (Some(pk), true) = (pk, hl_phase.1 < 3) {
-                    let _ = sock.send_to(&pk, fw_addr);
-                    hl_phase.1 += 1;
+        if args.pilot == Pilot::Trajectory && link_up && phase == "trajectory" {
+            if let Some(up) = &upload {
+                if !up.done() {
+                    bail!(
+                        "the trajectory upload did not finish within --upload-s {} s \
+                         (plant t = {t:.3} s): {}",
+                        args.upload_s,
+                        up.status()
+                    );
                 }
             }
-            if phase == "trajectory" {
-                if let Some(up) = &upload {
-                    if !up.done() {
-                        bail!(
-                            "the trajectory upload did not finish within --upload-s {} s \
-                             (plant t = {t:.3} s): {}",
-                            args.upload_s,
-                            up.status()
-                        );
-                    }
+            // start_trajectory once (a repeat would restart it), relative to the hover
+            // point; its answer within 100 ms, else sent again (up to three times)
+            let answer = shared
+                .lock()
+                .unwrap()
+                .hl_answers
+                .iter()
+                .find(|a| a.0 == HL_CMD_START_TRAJECTORY)
+                .copied();
+            match (answer, traj_start) {
+                (Some((_, 0)), _) => {
+                    traj_start_answered.get_or_insert(t);
                 }
-                // start_trajectory once (a repeat would restart it), relative to the hover
-                // point; its answer within 100 ms, else sent again (up to three times)
-                let answer = shared
-                    .lock()
-                    .unwrap()
-                    .hl_answers
-                    .iter()
-                    .find(|a| a.0 == HL_CMD_START_TRAJECTORY)
-                    .copied();
-                match (answer, traj_start) {
-                    (Some((_, 0)), _) => {
-                        traj_start_answered.get_or_insert(t);
-                    }
-                    (Some((_, e)), _) => {
-                        bail!("start_trajectory refused by the firmware (error {e})")
-                    }
-                    (None, Some((t0, n))) if n >= 3 && t - t0 >= 0.1 => {
-                        bail!("start_trajectory not answered after 3 sends 100 ms apart")
-                    }
-                    (None, Some((t0, n))) if t - t0 >= 0.1 => {
-                        traj_start = Some((t, n + 1));
-                    }
-                    (None, None) => traj_start = Some((t, 1)),
-                    (None, Some(_)) => {}
+                (Some((_, e)), _) => {
+                    bail!("start_trajectory refused by the firmware (error {e})")
                 }
-                if traj_start.is_some_and(|s| s.0 == t) {
-                    let pk = hl_start_trajectory_packet(0, traj_scale as f32, true, false);
-                    let _ = sock.send_to(&pk, fw_addr);
+                (None, Some((t0, n))) if n >= 3 && t - t0 >= 0.1 => {
+                    bail!("start_trajectory not answered after 3 sends 100 ms apart")
                 }
+                (None, Some((t0, n))) if t - t0 >= 0.1 => {
+                    traj_start = Some((t, n + 1));
+                }
+                (None, None) => traj_start = Some((t, 1)),
+                (None, Some(_)) => {}
+            }
+            if traj_start.is_some_and(|s| s.0 == t) {
+                let pk = hl_start_trajectory_packet(0, traj_scale as f32, true, false);
+                let _ = sock.send_to(&pk, fw_addr);
             }
         }
         if setpoint_now && args.pilot == Pilot::Stream {
