@@ -37,6 +37,31 @@ fn smoothstep(u: f64) -> (f64, f64, f64) {
     (u * u * (3.0 - 2.0 * u), 6.0 * u * (1.0 - u), 6.0 - 12.0 * u)
 }
 
+/// The end of every pilot's timeline, `te_s` after the descent began from `top`: the descent
+/// (`land_s`), one second landed, then the stop for 1 s + `linger_s`; `None` when it is over.
+/// The descent comes to rest at the ground itself (a move to a point below it would still be
+/// braking, with upward feed-forward, at touch-down and bounce the vehicle back up); once down,
+/// the setpoint sinks 5 cm below the ground so that the controller lets go.
+fn landing(
+    top: Vector3<f64>,
+    te_s: f64,
+    land_s: f64,
+    linger_s: f64,
+    yaw: f64,
+) -> Option<(&'static str, Option<TrajectoryPoint>)> {
+    let touch = Vector3::new(top.x, top.y, 0.0);
+    let bottom = Vector3::new(top.x, top.y, -0.05);
+    if te_s < land_s {
+        Some(("land", Some(smooth_move(top, touch, land_s, te_s, yaw))))
+    } else if te_s < land_s + 1.0 {
+        Some(("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw))))
+    } else if te_s < land_s + 2.0 + linger_s {
+        Some(("stop", None))
+    } else {
+        None
+    }
+}
+
 /// A smooth move from `a` to `b` over `dur_s`, at `t_s` into it: position, velocity, acceleration.
 fn smooth_move(
     a: Vector3<f64>,
@@ -496,10 +521,6 @@ pub fn run() -> Result<()> {
                 let te = t - t_engage;
                 let up_end = args.takeoff_s + args.upload_s;
                 let tr_end = up_end + traj_total_s + TRAJ_TAIL_S;
-                let land_end = tr_end + args.land_s;
-                let top = traj_ref(traj_total_s).p_m;
-                let touch = Vector3::new(top.x, top.y, 0.0);
-                let bottom = Vector3::new(top.x, top.y, -0.05);
                 if te < args.takeoff_s {
                     let sp = smooth_move(ground_xy, target0.p_m, args.takeoff_s, te, yaw0);
                     ("takeoff", Some(sp))
@@ -509,43 +530,29 @@ pub fn run() -> Result<()> {
                 } else if te < tr_end {
                     let t0 = traj_start.map_or(t, |s| s.0);
                     ("trajectory", Some(traj_ref(t - t0)))
-                } else if te < land_end {
-                    let sp = smooth_move(top, touch, args.land_s, te - tr_end, yaw0);
-                    ("land", Some(sp))
-                } else if te < land_end + 1.0 {
-                    ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
-                } else if te < land_end + 2.0 + args.linger_s {
-                    ("stop", None)
                 } else {
-                    break;
+                    let top = traj_ref(traj_total_s).p_m;
+                    match landing(top, te - tr_end, args.land_s, args.linger_s, yaw0) {
+                        Some(p) => p,
+                        None => break,
+                    }
                 }
             }
             Some(t_engage) => {
                 let te = t - t_engage;
                 let hold_end = args.takeoff_s + hold_s;
-                let land_end = hold_end + args.land_s;
                 let hold_ref = |tau: f64| scenario.reference(tau.clamp(0.0, hold_s));
-                let top = hold_ref(hold_s).p_m;
-                // The descent comes to rest at the ground itself; a move to a point below it
-                // would still be braking (upward feed-forward) at touch-down and bounce the
-                // vehicle back up. Once down, the setpoint sinks below the ground so that the
-                // controller lets go.
-                let touch = Vector3::new(top.x, top.y, 0.0);
-                let bottom = Vector3::new(top.x, top.y, -0.05);
                 if te < args.takeoff_s {
                     let sp = smooth_move(ground_xy, target0.p_m, args.takeoff_s, te, yaw0);
                     ("takeoff", Some(sp))
                 } else if te < hold_end {
                     ("hold", Some(hold_ref(te - args.takeoff_s)))
-                } else if te < land_end {
-                    let sp = smooth_move(top, touch, args.land_s, te - hold_end, yaw0);
-                    ("land", Some(sp))
-                } else if te < land_end + 1.0 {
-                    ("landed", Some(smooth_move(bottom, bottom, 1.0, 0.0, yaw0)))
-                } else if te < land_end + 2.0 + args.linger_s {
-                    ("stop", None)
                 } else {
-                    break;
+                    let top = hold_ref(hold_s).p_m;
+                    match landing(top, te - hold_end, args.land_s, args.linger_s, yaw0) {
+                        Some(p) => p,
+                        None => break,
+                    }
                 }
             }
         };
