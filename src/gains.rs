@@ -166,6 +166,12 @@ pub const COMPOSITE_TORQUE_FILTER_S: f32 = 0.005;
 /// After it, [`CompositeGains::fault_q_torque`] for [`CompositeGains::fault_boost_s`].
 pub const COMPOSITE_FAULT_INNOVATION: f32 = 0.35;
 
+/// Whether the composite law's prediction doubts the motor lag ([`CompositeGains::lag_doubt`]):
+/// a model's lag is a guess about the motors (the shipped blob's 50 ms flies plants from none to
+/// 72 ms), and a lag longer than the motors' otherwise reads every fast command as a
+/// disturbance.
+pub const COMPOSITE_LAG_DOUBT: bool = true;
+
 /// [`Gains::velocity_consistency_tau_s`] of [`Gains::for_vehicle`] (s): slow against the
 /// position loop (4 rad/s), fast against a changing wind; the result is flat across that range
 /// (docs/crazyflie-chain.md, "How the gains are designed for the chain").
@@ -324,6 +330,7 @@ impl Gains {
         g.composite.q_torque = COMPOSITE_Q_TORQUE;
         g.composite.torque_rate_scale = COMPOSITE_TORQUE_RATE_SCALE;
         g.composite.fault_innovation = COMPOSITE_FAULT_INNOVATION;
+        g.composite.lag_doubt = COMPOSITE_LAG_DOUBT;
         g
     }
 

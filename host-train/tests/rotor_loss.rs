@@ -93,10 +93,7 @@ fn rotor_loss_mid_composite_recovers_fast() {
 
 /// The default law (the composite one) against the paper's gradient law on every scenario of
 /// `scenarios/` flown with the shipped blob: never worse by more than max(1.5×, 0.05 cm), and
-/// never a crash where the paper's law flies; one exception, bounded: `diamond`, a fast path
-/// with no disturbance and no motor lag in the plant, where the composite law's prediction
-/// assumes the blob's 50 ms lag, bounded at 0.35 cm (its figures, and with the plant's lag
-/// assumed: docs/adaptation.md). The `bl-*` scenarios (the brushless benchmark vehicle, 45 g)
+/// never a crash where the paper's law flies, with no exception. The `bl-*` scenarios (the brushless benchmark vehicle, 45 g)
 /// are left out: the shipped blob describes a 27 g vehicle, and they are flown with a blob of
 /// their own.
 #[test]
@@ -127,11 +124,7 @@ fn the_default_law_is_never_much_worse_than_the_paper_law() {
             d * 100.0,
             g * 100.0
         );
-        let bar = if sc.name == "diamond" {
-            0.0035
-        } else {
-            (1.5 * g).max(g + 0.0005)
-        };
+        let bar = (1.5 * g).max(g + 0.0005);
         assert!(
             d <= bar,
             "{}: default {d:.5} m against the paper's law {g:.5} m",

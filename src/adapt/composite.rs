@@ -84,6 +84,12 @@ pub struct CompositeGains {
     pub fault_ratio: f32,
     /// See [`CompositeGains::fault_ratio`] (s).
     pub fault_baseline_tau_s: f32,
+    /// Doubt the assumed motor lag: a prediction error that the delivered wrench through any lag
+    /// from none to `motor_tau_s` would explain is not learned (the update sees the error of
+    /// the nearer of the two predictions, or none when the measurement lies between them). A
+    /// model whose lag is longer than the motors' otherwise reads every fast command as a
+    /// disturbance; a fault, whose force no lag explains, is learned as before.
+    pub lag_doubt: bool,
 }
 
 /// A boost of the torque observer ([`CompositeGains::fault_q_torque`]) ends when the torque
@@ -116,6 +122,7 @@ impl Default for CompositeGains {
             fault_boost_s: 0.3,
             fault_ratio: 10.0,
             fault_baseline_tau_s: 2.0,
+            lag_doubt: false,
         }
     }
 }
@@ -176,6 +183,9 @@ pub(super) struct PredictionState {
     pub(super) u_lag: Vector4<f32>,
     /// `u_lag` through the measurement's lag (`accel_lag_s`, `gyro_lag_s`).
     pub(super) u_sensed: Vector4<f32>,
+    /// The filtered difference of the predictions without and with the motor lag (a's units,
+    /// rows as `z_f`; [`CompositeGains::lag_doubt`]).
+    pub(super) gap_f: [f32; 6],
     /// Whether `u_lag` holds a value.
     pub(super) has_lag: bool,
     /// Whether `prev_*` hold a tick (false after a reset or a fault).
@@ -229,7 +239,8 @@ impl Adaptation {
             return None;
         }
         let m = x.mass_kg;
-        let u = if self.pred.has_lag {
+        let (raw, had_lag) = (u, self.pred.has_lag);
+        let u = if had_lag {
             let beta = lag_gain(gains.motor_tau_s, dt_s);
             let lagged = self.pred.u_lag + (u - self.pred.u_lag) * beta;
             self.pred.u_lag = lagged;
@@ -251,11 +262,14 @@ impl Adaptation {
             u
         };
         self.pred.has_lag = true;
+        // Without the motor lag (`lag_doubt`): the delivered wrench against the lagged one.
+        let du = (gains.lag_doubt && had_lag).then(|| raw - self.pred.u_lag);
         // With port terms the input acts through its effective gain: g (k ∘ u).
-        let gu = match x.port {
+        let gain_of = |u: Vector4<f32>| match x.port {
             Some(port) => x.gain * u.component_mul(&port.input_gain),
             None => x.gain * u,
         };
+        let gu = gain_of(u);
         let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
         let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
@@ -305,12 +319,42 @@ impl Adaptation {
             &mut eps,
         );
         self.pred.has_filter = true;
-        let out = self.kalman(gains, a_max, (dt_s, dt_s * x.feature_scale), eps);
+        // The doubted lag: the error the fastest allowed prediction leaves is ε − gap; the
+        // update sees the one nearer zero, or none if they differ in sign (the measurement lies
+        // between the two predictions).
+        let mut z = self.pred.z_f;
+        if let Some(du) = du {
+            let gap = gain_of(du);
+            for (r, (((gf, e), zr), gr)) in self
+                .pred
+                .gap_f
+                .iter_mut()
+                .zip(eps.iter_mut())
+                .zip(z.iter_mut())
+                .zip(gap.iter())
+                .enumerate()
+            {
+                let (sc, al) = if r < 3 { (sf, alpha_f) } else { (st, alpha_t) };
+                *gf += (sc * gr - *gf) * al;
+                let alt = *e - *gf;
+                let kept = if *e * alt <= 0.0 {
+                    0.0
+                } else if alt.abs() < e.abs() {
+                    alt
+                } else {
+                    *e
+                };
+                *zr -= *e - kept;
+                *e = kept;
+            }
+        }
+        let out = self.kalman(gains, a_max, (dt_s, dt_s * x.feature_scale), z, eps);
         if out.is_none() {
             // A non-finite feature reached the filter: start it again at the next sample.
             self.pred.has_filter = false;
             self.pred.h_f = [[0.0; FEATURES]; 6];
             self.pred.z_f = [0.0; 6];
+            self.pred.gap_f = [0.0; 6];
         }
         out
     }
@@ -321,6 +365,7 @@ impl Adaptation {
         g: &CompositeGains,
         a_max: f32,
         (dt_s, q_dt_s): (f32, f32),
+        zf: [f32; 6],
         eps: [f32; 6],
     ) -> Option<Vector6<f32>> {
         // P lives in `self.p` as a 6×6 matrix, updated in place (no copy of its 36 entries in
@@ -355,7 +400,6 @@ impl Adaptation {
             }
         }
         let rows = &self.pred.h_f;
-        let zf = &self.pred.z_f;
         let a0: [f32; FEATURES] = self.a.data.0[0];
         // `eps`: the prediction error with the estimate before this tick's update
         // (`fpu::filter_rows`).
@@ -395,7 +439,7 @@ impl Adaptation {
         let mut a = a0;
         let (rf, rt, [rx, ry, rz]) = (g.r_force, g.r_torque, g.r_torque_axis);
         let mut s = [rf, rf, rf, rt * rx, rt * ry, rt * rz];
-        crate::fpu::kalman_rows(p, &mut a, rows, zf, &mut s);
+        crate::fpu::kalman_rows(p, &mut a, rows, &zf, &mut s);
         if !crate::fpu::all_finite(s) {
             // A non-finite feature: no update of a this tick, and P starts again (the rows
             // before it already moved P).
