@@ -84,8 +84,8 @@ pub struct CompositeGains {
     pub fault_ratio: f32,
     /// See [`CompositeGains::fault_ratio`] (s).
     pub fault_baseline_tau_s: f32,
-    /// Doubt the assumed motor lag: a prediction error that the delivered wrench through any lag
-    /// from none to `motor_tau_s` would explain is not learned (the update sees the error of
+    /// Doubt the assumed motor lag on the force rows: a prediction error that the delivered
+    /// thrust through any lag from none to `motor_tau_s` would explain is not learned (the update sees the error of
     /// the nearer of the two predictions, or none when the measurement lies between them). A
     /// model whose lag is longer than the motors' otherwise reads every fast command as a
     /// disturbance; a fault, whose force no lag explains, is learned as before.
@@ -183,9 +183,9 @@ pub(super) struct PredictionState {
     pub(super) u_lag: Vector4<f32>,
     /// `u_lag` through the measurement's lag (`accel_lag_s`, `gyro_lag_s`).
     pub(super) u_sensed: Vector4<f32>,
-    /// The filtered difference of the predictions without and with the motor lag (a's units,
-    /// rows as `z_f`; [`CompositeGains::lag_doubt`]).
-    pub(super) gap_f: [f32; 6],
+    /// The filtered difference of the predictions without and with the motor lag, force rows
+    /// (a's units, as `z_f`; [`CompositeGains::lag_doubt`]).
+    pub(super) gap_f: [f32; 3],
     /// Whether `u_lag` holds a value.
     pub(super) has_lag: bool,
     /// Whether `prev_*` hold a tick (false after a reset or a fault).
@@ -319,30 +319,35 @@ impl Adaptation {
             &mut eps,
         );
         self.pred.has_filter = true;
-        // The doubted lag: the error the fastest allowed prediction leaves is ε − gap; the
-        // update sees the one nearer zero, or none if they differ in sign (the measurement lies
-        // between the two predictions).
+        // The doubted lag, on the force rows (the thrust's lag; the torque rows keep theirs for
+        // the attitude loop's margin and the change detector): the error the prediction
+        // without the lag leaves is ε − gap; the update sees the one nearer zero, or none if
+        // they differ in sign (the measurement lies between the two predictions): the median
+        // of 0, ε and ε − gap.
         let mut z = self.pred.z_f;
         if let Some(du) = du {
-            let gap = gain_of(du);
-            for (r, (((gf, e), zr), gr)) in self
+            let du = match x.port {
+                Some(port) => du.component_mul(&port.input_gain),
+                None => du,
+            };
+            let gap = x.gain.fixed_rows::<3>(0) * du;
+            let rows = self
                 .pred
                 .gap_f
                 .iter_mut()
                 .zip(eps.iter_mut())
                 .zip(z.iter_mut())
-                .zip(gap.iter())
-                .enumerate()
-            {
-                let (sc, al) = if r < 3 { (sf, alpha_f) } else { (st, alpha_t) };
-                *gf += (sc * gr - *gf) * al;
+                .zip(gap.iter());
+            for (((gf, e), zr), gr) in rows {
+                *gf += (sf * gr - *gf) * alpha_f;
                 let alt = *e - *gf;
-                let kept = if *e * alt <= 0.0 {
-                    0.0
-                } else if alt.abs() < e.abs() {
-                    alt
+                let (lo, hi) = if *e < alt { (*e, alt) } else { (alt, *e) };
+                let kept = if hi < 0.0 {
+                    hi
+                } else if lo > 0.0 {
+                    lo
                 } else {
-                    *e
+                    0.0
                 };
                 *zr -= *e - kept;
                 *e = kept;
@@ -354,7 +359,7 @@ impl Adaptation {
             self.pred.has_filter = false;
             self.pred.h_f = [[0.0; FEATURES]; 6];
             self.pred.z_f = [0.0; 6];
-            self.pred.gap_f = [0.0; 6];
+            self.pred.gap_f = [0.0; 3];
         }
         out
     }
