@@ -53,7 +53,11 @@ pub const CONTROL_SCALE: [f32; 4] = [
 
 /// The learned Hamiltonian model: the networks θ (J⁻¹, g) and φ (W) of a weight blob, and the
 /// vehicle's motor lag the blob carries.
+///
+/// `repr(C)` with the weights first: [`ModelWeights`]'s memory (the mass, then the parameters in
+/// blob order) starts at offset 0, which in-place decoding relies on.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct LearnedModel {
     /// The learned parameters.
     pub weights: ModelWeights,
@@ -66,6 +70,8 @@ pub struct LearnedModel {
     /// rigid body alone, [`PortTerms::IDENTITY`]).
     port: PortTerms,
 }
+
+const _: () = assert!(core::mem::offset_of!(LearnedModel, weights) == 0);
 
 impl LearnedModel {
     /// Wraps trained weights, with the default motor lag ([`DEFAULT_MOTOR_TAU_S`]).
