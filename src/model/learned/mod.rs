@@ -101,13 +101,13 @@ impl LearnedModel {
         Self { port, ..self }
     }
 
-    /// [`LearnedModel::with_port`] in place.
-    pub(crate) fn set_port(&mut self, port: PortTerms) {
+    /// [`LearnedModel::with_port`] in place (no 10 KB copy on the stack: for in-place decoding).
+    pub fn set_port(&mut self, port: PortTerms) {
         self.port = port;
     }
 
-    /// [`LearnedModel::with_motor_tau_s`] in place.
-    pub(crate) fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
+    /// [`LearnedModel::with_motor_tau_s`] in place (no 10 KB copy on the stack).
+    pub fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
         self.motor_tau_bits = motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits();
     }
 
