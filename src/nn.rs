@@ -27,7 +27,11 @@ pub fn softplus(x: f32) -> f32 {
 }
 
 /// A dense (affine) layer y = W x + b with `I` inputs and `O` outputs.
+///
+/// `repr(C)`: its memory is the weights row by row then the biases, f32 each with no padding,
+/// the order of [`Dense::params_mut`] (see [`crate::model::ModelWeights`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Dense<const I: usize, const O: usize> {
     /// `weight[o][i]`: the weight from input `i` to output `o`.
     pub weight: [[f32; I]; O],
@@ -148,7 +152,10 @@ fn hidden<const I: usize, const H: usize>(
 }
 
 /// A multilayer perceptron `I → H → H → O`: two tanh hidden layers of width `H`, linear output.
+///
+/// `repr(C)`: its memory is its layers in order, the order of [`Mlp::params_mut`].
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[repr(C)]
 pub struct Mlp<const I: usize, const H: usize, const O: usize> {
     /// Input layer.
     pub l0: Dense<I, H>,

@@ -51,10 +51,10 @@
  * object by ci-check.sh (stack-estimate.py), is about 1.1 KB including controllerOutOfTree's
  * own frame; build-in-tree.sh checks controllerOutOfTree in the linked cf2.elf. The app task
  * (CONFIG_APP_STACKSIZE words, app-config) does what needs more: at boot hf_init (which builds
- * the controller on its stack: too deep for the system task's 1,200 B, where
- * controllerOutOfTreeInit first runs) and hf_self_test(), which runs a step on a scratch
- * controller; later the model swaps of an upload or a revert (decode and self test, about 2 ms,
- * on the ground only). controllerOutOfTreeInit stays light. Until the self test has passed, the output is
+ * the controller in place, but the vehicle's default gains are too deep for the system task's
+ * 1,200 B, where controllerOutOfTreeInit first runs) and hf_self_test(&ctl), which steps ctl
+ * itself before the stabilizer may use it; later the model swaps of an upload or a revert
+ * (decode in place and self test on ctl, about 2 ms, on the ground only). controllerOutOfTreeInit stays light. Until the self test has passed, the output is
  * zero with HF_SHIM_NOT_READY in the faults log; during a swap the stabilizer does not touch the
  * controller and outputs zero with HF_SHIM_SWAPPING. The hand-over is one atomic byte (swapJob):
  * the stabilizer sets it, the app task polls it every HF_SWAP_POLL_MS and clears it when done.
@@ -66,9 +66,8 @@
  * and rows, in a's units; refused values revert).
  *
  * Weights over the radio (MEM_TYPE_APP, see "Upload" below and README.md): a client writes a
- * weight blob into a RAM staging slot; the memory task checks it at the commit; the
- * app task decodes it, self-tests it and makes it fly at the first tick the controller is not
- * airborne.
+ * weight blob into a RAM slot; the memory task checks it at the commit; the app task decodes it
+ * in place, self-tests it and makes it fly at the first tick the controller is not airborne.
  * Parameter revert (write 1) goes back to the compiled-in blob the same way. RAM only: every
  * boot flies the compiled-in blob.
  * Logs (group hamflight): a0..a5, faults (HF_FAULT_* | HF_COND_*), sat (bit 0 yaw, 1 roll/pitch,
@@ -108,7 +107,7 @@
 #error "HAMFLIGHT_RATE_HZ must be RATE_500_HZ or RATE_1000_HZ"
 #endif
 
-/* 1: the weights upload over the radio (MEM_TYPE_APP, "Upload" below; 19.4 KB of RAM);
+/* 1: the weights upload over the radio (MEM_TYPE_APP, "Upload" below; 9.6 KB of RAM);
  * 0: compiled out (the revert parameter and the blob logs stay; the compiled-in blob flies). */
 #ifndef HAMFLIGHT_UPLOAD
 #define HAMFLIGHT_UPLOAD 1
@@ -182,37 +181,50 @@ static float logPTrace;
  * Address layout of the memory (little-endian; cflib: cf.mem.get_mems(MemoryElement.TYPE_APP),
  * cf.mem.read / cf.mem.write, 24 bytes per packet):
  *   0x0000..0x003F  info, read-only (HF_UP_INFO_BYTES):
- *     0x00 u32 magic "HFUP"     0x04 u16 layout version (1)
+ *     0x00 u32 magic "HFUP"     0x04 u16 layout version (2)
  *     0x06 u8  active source (0 compiled-in, 1 uploaded)
  *     0x07 u8  upload state (HF_UP_*)        0x08 u32 active blob's CRC-32
  *     0x0C f32 active mass (kg)              0x10 u16 active blob's format version
- *     0x12 u8  last error (HF_ERR_BLOB_*, HF_ERR_SELF_TEST; 0 none)   0x13 u8 zero
- *     0x14 u32 staging capacity (HF_BLOB_MAX_BYTES)
+ *     0x12 u8  last error (HF_ERR_BLOB_*, HF_ERR_SELF_TEST, HF_UP_ERR_BUSY_*; 0 none)
+ *     0x13 u8  zero
+ *     0x14 u32 capacity (HF_BLOB_MAX_BYTES)
  *     0x18 u32 length announced by the last BEGIN
  *     0x1C u32 CRC-32 of the last upload that passed the commit check (0 none)
  *     0x20 char[32] active blob's name, NUL-padded ("uploaded" for an upload)
  *   0x0040          control, write-only, one packet each:
- *     01 + u32 len  BEGIN: a new upload of len bytes (1..capacity); the staging slot is zeroed
- *     02            COMMIT: every byte has been sent; the memory task checks the staged bytes
- *                   (hf_blob_check: format, CRC, length, finiteness, mass, motor lag)
- *   0x1000 + off    data: writes fill staging[off..] (only between BEGIN and COMMIT, inside
- *                   len; any order, repeats allowed); reads give the staging slot (the last
- *                   upload's bytes, which fly while the source is "uploaded").
+ *     01 + u32 len  BEGIN: a new upload of len bytes (1..capacity); the slot is zeroed
+ *     02            COMMIT: every byte has been sent; the memory task checks the bytes in the
+ *                   slot (hf_blob_check: format, CRC, length, finiteness, mass, motor lag, port)
+ *   0x1000 + off    data: writes fill the slot's bytes [off..] (only between BEGIN and COMMIT,
+ *                   inside len; any order, repeats allowed); reads give them back from BEGIN
+ *                   until the swap starts (RECEIVING, PENDING, REJECTED at the commit) and are
+ *                   refused from then on: the swap decodes the bytes in place.
+ * ONE slot (hf_model_t, HF_MODEL_STORAGE_BYTES) holds first the upload's bytes, then the model
+ * that flies: the swap decodes it in place (hf_model_load moves the parameter block down over
+ * the header), so an uploaded model that flies occupies the slot. Hence BEGIN while the state is
+ * ACTIVE (an uploaded model flies):
+ *   - airborne: refused, upError HF_UP_ERR_BUSY_FLYING ("busy: an uploaded model is flying;
+ *     land first");
+ *   - not airborne: refused, upError HF_UP_ERR_BUSY_REVERTING, and the compiled-in model is
+ *     asked to fly again (as the revert parameter); once it does (state IDLE, within a few ticks
+ *     and HF_SWAP_POLL_MS) a BEGIN is accepted. A client retries BEGIN until then.
+ * While the compiled-in model flies, an upload works at any time, in flight too (the swap waits
+ * for the ground).
  * The end of an upload is the COMMIT, not a byte count: a chunk that never arrived is a zero
  * in the slot and fails the CRC (a torn upload), and a blob whose own header length disagrees
  * with len fails the length check. Writes are refused (EIO to the client) outside a session
- * or the window and while the app task is swapping.
+ * or the window, while the app task is swapping, and (BEGIN) while an uploaded model flies.
  * States: IDLE -> BEGIN -> RECEIVING -> COMMIT -> PENDING (checked) or REJECTED; PENDING ->
- * (first tick not airborne) SWAPPING -> ACTIVE, or REJECTED if the self test fails. A new
- * BEGIN while PENDING drops the pending upload. The flying model is never touched by a
- * rejected upload: the model slot is written only in SWAPPING, on the ground, after every
- * check passed (only a blob that passes every check but fails the self test while an earlier
- * upload is active leaves the compiled-in blob flying, never an unchecked one). */
+ * (first tick not airborne) SWAPPING -> ACTIVE, or REJECTED if the self test fails (the slot is
+ * then zeroed and the compiled-in blob flies); ACTIVE -> (revert, or a BEGIN on the ground)
+ * IDLE with the compiled-in blob flying. A new BEGIN while PENDING drops the pending upload. The
+ * flying model is never touched by an upload: the slot is written only while it does not fly,
+ * and it flies only after every check and the self test passed. */
 #define HF_UP_INFO_BYTES 0x40u
 #define HF_UP_CONTROL_ADDR 0x40u
 #define HF_UP_DATA_ADDR 0x1000u
 #define HF_UP_MAGIC 0x50554648u /* "HFUP" */
-#define HF_UP_LAYOUT_VERSION 1u
+#define HF_UP_LAYOUT_VERSION 2u
 #define HF_UP_CMD_BEGIN 1u
 #define HF_UP_CMD_COMMIT 2u
 enum {
@@ -223,6 +235,10 @@ enum {
   HF_UP_ACTIVE = 4,
   HF_UP_REJECTED = 5
 };
+/* Refusals of a BEGIN while an uploaded model flies (the info block's last error; above the
+ * core's HF_ERR_* codes). */
+#define HF_UP_ERR_BUSY_FLYING 64u    /* busy: an uploaded model is flying; land first */
+#define HF_UP_ERR_BUSY_REVERTING 65u /* busy: handing back to the compiled-in model; retry BEGIN */
 /* What the app task is asked to do (swapJob). */
 enum { HF_JOB_NONE = 0, HF_JOB_LOAD = 1, HF_JOB_REVERT = 2 };
 
@@ -250,10 +266,18 @@ static bool upSwap(uint8_t from, uint8_t to) {
                                      __ATOMIC_SEQ_CST);
 }
 
+/* The vehicle is airborne, or stopped in flight and still flying (see disengage). Read by the
+ * memory task too (one byte each). */
+static bool airborneNow(void) {
+  return phase == HF_PHASE_AIRBORNE || (offWhileAirborne && supervisorIsFlying());
+}
+
 #if HAMFLIGHT_UPLOAD
-/* RAM: the staging slot (HF_BLOB_MAX_BYTES) and the decoded model (HF_MODEL_STORAGE_BYTES). */
-static uint8_t staging[HF_BLOB_MAX_BYTES];
-static hf_model_t uploadedModel;
+/* RAM: the one slot (HF_MODEL_STORAGE_BYTES): the upload's bytes, then the model decoded from
+ * them in place. */
+static hf_model_t slot;
+/* The slot holds the upload's bytes (from BEGIN until the swap decodes them): data reads. */
+static bool slotHoldsBytes;
 static uint32_t upLen;       /* announced by BEGIN */
 static uint32_t upStagedCrc; /* of the last upload that passed the commit check */
 static bool memRegistered;    /* the MEM_TYPE_APP handler is registered */
@@ -294,7 +318,7 @@ static void upInfo(uint8_t info[HF_UP_INFO_BYTES]) {
   }
 }
 
-/* The memory task reads: the info block or the staging slot, each whole within its region. */
+/* The memory task reads: the info block or the slot's upload bytes, each whole within its region. */
 static bool upMemRead(const uint8_t internalId, const uint32_t memAddr, const uint8_t readLen,
                       uint8_t *buffer) {
   (void)internalId;
@@ -305,14 +329,16 @@ static bool upMemRead(const uint8_t internalId, const uint32_t memAddr, const ui
     return true;
   }
   if (memAddr >= HF_UP_DATA_ADDR && memAddr - HF_UP_DATA_ADDR <= HF_BLOB_MAX_BYTES &&
-      readLen <= HF_BLOB_MAX_BYTES - (memAddr - HF_UP_DATA_ADDR)) {
-    memcpy(buffer, &staging[memAddr - HF_UP_DATA_ADDR], readLen);
+      readLen <= HF_BLOB_MAX_BYTES - (memAddr - HF_UP_DATA_ADDR) &&
+      __atomic_load_n(&slotHoldsBytes, __ATOMIC_SEQ_CST) && upLoad() != HF_UP_SWAPPING) {
+    memcpy(buffer, &slot.opaque[memAddr - HF_UP_DATA_ADDR], readLen);
     return true;
   }
   return false;
 }
 
-/* BEGIN: from any state but SWAPPING. */
+/* BEGIN: from any state but SWAPPING and ACTIVE (the slot flies: see "Upload"). Once the state
+ * is RECEIVING no swap can start, so the slot is the memory task's until the COMMIT. */
 static bool upBegin(uint32_t len) {
   if (len == 0u || len > HF_BLOB_MAX_BYTES) {
     return false;
@@ -322,9 +348,19 @@ static bool upBegin(uint32_t len) {
     if (s == HF_UP_SWAPPING) {
       return false;
     }
+    if (s == HF_UP_ACTIVE) {
+      if (airborneNow()) {
+        upError = HF_UP_ERR_BUSY_FLYING;
+      } else {
+        upError = HF_UP_ERR_BUSY_REVERTING;
+        revertRequest = 1; /* the stabilizer hands the app task a revert at its next tick */
+      }
+      return false;
+    }
   } while (!__atomic_compare_exchange_n(&upState, &s, (uint8_t)HF_UP_RECEIVING, false,
                                         __ATOMIC_SEQ_CST, __ATOMIC_SEQ_CST));
-  memset(staging, 0, sizeof(staging));
+  memset(&slot, 0, sizeof(slot));
+  __atomic_store_n(&slotHoldsBytes, true, __ATOMIC_SEQ_CST);
   upLen = len;
   upError = 0;
   upStagedCrc = 0;
@@ -337,7 +373,7 @@ static bool upCommit(void) {
     return false;
   }
   hf_blob_info_t info;
-  const uint32_t err = hf_blob_check(staging, upLen, &info);
+  const uint32_t err = hf_blob_check(slot.opaque, upLen, &info);
   if (err == HF_OK) {
     upStagedCrc = info.crc;
     upStore(HF_UP_PENDING);
@@ -367,7 +403,7 @@ static bool upMemWrite(const uint8_t internalId, const uint32_t memAddr, const u
   }
   if (memAddr >= HF_UP_DATA_ADDR && upLoad() == HF_UP_RECEIVING &&
       memAddr - HF_UP_DATA_ADDR <= upLen && writeLen <= upLen - (memAddr - HF_UP_DATA_ADDR)) {
-    memcpy(&staging[memAddr - HF_UP_DATA_ADDR], buffer, writeLen);
+    memcpy(&slot.opaque[memAddr - HF_UP_DATA_ADDR], buffer, writeLen);
     return true;
   }
   return false;
@@ -399,21 +435,30 @@ static void printActive(void) {
 }
 
 /* The app task's swap (HF_JOB_LOAD, HF_JOB_REVERT), with the controller to itself: the
- * stabilizer started it while not airborne and outputs zero until it is done. */
+ * stabilizer started it while not airborne and outputs zero until it is done. The self tests
+ * (hf_use_model) step ctl itself: no scratch controller on this task's stack. */
 static void serveSwap(uint8_t job) {
   (void)hf_use_model(&ctl, NULL); /* nothing flies the slot while it is loaded */
   setActiveBuiltin();
 #if HAMFLIGHT_UPLOAD
+  /* A revert (or a BEGIN on the ground) while an upload flew: the slot is free again. */
+  (void)upSwap(HF_UP_ACTIVE, HF_UP_IDLE);
   if (job == HF_JOB_LOAD) {
+    /* The bytes are decoded in place: from here on the data region reads are refused. */
+    __atomic_store_n(&slotHoldsBytes, false, __ATOMIC_SEQ_CST);
     hf_blob_info_t info;
-    const uint32_t err = hf_model_load(&uploadedModel, staging, upLen, &info);
-    if (err == HF_OK && hf_use_model(&ctl, &uploadedModel) == HF_OK) {
+    uint32_t err = hf_model_load(&slot, upLen, &info);
+    if (err == HF_OK) {
+      err = hf_use_model(&ctl, &slot); /* the self test, on ctl; the compiled-in model if it fails */
+    }
+    if (err == HF_OK) {
       activeSource = 1;
       activeCrc = info.crc;
       activeMassKg = info.mass_kg;
       activeVersion = info.version;
       upStore(HF_UP_ACTIVE);
     } else {
+      memset(&slot, 0, sizeof(slot)); /* empty: nothing may fly it */
       upError = (uint8_t)err;
       upStore(HF_UP_REJECTED);
       DEBUG_PRINT("upload rejected at load: error %u\n", (unsigned int)err);
@@ -468,9 +513,7 @@ static void disengage(void) {
 /* Hands the app task a pending swap (an upload that passed its check, or a revert) if the
  * vehicle is not airborne; true if it did (the caller outputs zero). */
 static HF_NOINLINE bool startSwapIfDue(void) {
-  /* Stopped in flight and still flying (see disengage): as airborne as AIRBORNE. */
-  const bool airborne = phase == HF_PHASE_AIRBORNE || (offWhileAirborne && supervisorIsFlying());
-  if (!isInit || airborne || swapping()) {
+  if (!isInit || airborneNow() || swapping()) {
     return false;
   }
   uint8_t next;
@@ -752,9 +795,9 @@ void controllerOutOfTree(control_t *control, const setpoint_t *setpoint,
   updateLogs();
 }
 
-/* Builds the controller and gives the parameters its defaults. In the app task: hf_init
- * constructs the controller on its stack (about 2.6 KB deep with the vehicle's gains), more than
- * the system task has (1,200 B), where controllerOutOfTreeInit first runs. */
+/* Builds the controller (in place) and gives the parameters its defaults. In the app task: the
+ * default gains for the vehicle take more stack than the system task has (1,200 B), where
+ * controllerOutOfTreeInit first runs. */
 static void initController(void) {
   hf_init(&ctl);
   if (hf_set_law(&ctl, lawParam) != HF_OK) {
@@ -771,7 +814,7 @@ void appMain(void) {
   DEBUG_PRINT("select with param stabilizer.controller = %d (out of tree)\n",
               (int)ControllerTypeOot);
   initController();
-  if (!hf_self_test()) {
+  if (!hf_self_test(&ctl)) { /* steps ctl itself: the stabilizer does not use it before ready */
     DEBUG_PRINT("self test FAILED: the controller stays off\n");
     for (;;) {
       vTaskDelay(M2T(60000));

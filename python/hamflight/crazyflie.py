@@ -3,14 +3,17 @@
 Subcommands (``hamflight-cf --help``, or ``python -m hamflight.crazyflie``):
 
 - ``upload URI FILE.hfw``: writes a weight blob into the app's MEM_TYPE_APP memory (the shim's
-  staging slot), reads it back, commits it and waits until it flies (the app swaps it in only
-  while the vehicle is not airborne), then reports the active blob's CRC;
+  RAM slot), reads it back, commits it and waits until it flies (the app swaps it in only
+  while the vehicle is not airborne), then reports the active blob's CRC. While an uploaded
+  blob flies, the slot is busy: the app refuses a new upload in flight, and the tool waits for
+  the landing, then uploads (so an upload in flight still flies from the landing on);
 - ``log URI --out flight.csv``: records the variables ``host-train import`` needs, as its CSV;
 - ``params URI [name=value ...]``: shows (and sets) the ``hamflight`` parameters.
 
 The memory layout and protocol are the shim's (``firmware/bitcraze-app/hamflight_oot.c``,
 "Upload"): an info block at 0x0000, a control word at 0x0040 (BEGIN + length, COMMIT), the
-staging slot at 0x1000. cflib splits every read and write into 24-byte packets.
+slot's bytes at 0x1000 (readable only until the swap decodes them in place). cflib splits every
+read and write into 24-byte packets.
 
 cflib is an optional dependency: ``pip install 'hamflight[crazyflie]'``. Everything but the
 connection itself (:class:`Link`) takes cflib's objects as arguments, so the tests drive it with
@@ -49,7 +52,7 @@ INFO_BYTES = 0x40
 CONTROL_ADDR = 0x0040
 DATA_ADDR = 0x1000
 INFO_MAGIC = 0x50554648  # "HFUP"
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 CMD_BEGIN = 1
 CMD_COMMIT = 2
 #: Upload states (the info block's byte 7, log hamflight.upState).
@@ -69,7 +72,11 @@ ERROR_NAMES = {
     25: "motor time constant outside 0..1 s",
     26: "self test failed (hover thrust not m g +- 20 %)",
     27: "port terms that cannot fly (an input gain, a lag or a negative dissipation)",
+    64: "busy: an uploaded model is flying; land first",
+    65: "busy: handing back to the compiled-in model; retry BEGIN",
 }
+#: The shim's refusals of a BEGIN while an uploaded blob flies from the slot.
+ERR_BUSY_FLYING, ERR_BUSY_REVERTING = 64, 65
 BLOB_HEADER_LEN = 28
 BLOB_CRC_LEN = 4
 
@@ -201,25 +208,66 @@ class AppMemory:
         return Info.parse(self.read(INFO_ADDR, INFO_BYTES))
 
 
+def begin(
+    app: AppMemory,
+    length: int,
+    say: Callable[[str], None] = print,
+    wait_landing_s: float = 600.0,
+    poll_s: float = 0.1,
+    report_every_s: float = 10.0,
+) -> None:
+    """BEGIN an upload of ``length`` bytes, retried while the app is busy: while it swaps a
+    model, and while an uploaded blob flies from the slot (in flight: until the vehicle has
+    landed, with a message every ``report_every_s``; on the ground: until the app has handed the
+    controller back to the compiled-in blob). Raises :class:`UploadError` after
+    ``wait_landing_s`` or for another refusal."""
+    start = time.monotonic()
+    told = -1
+    next_report = start + report_every_s
+    while not app.write(CONTROL_ADDR, struct.pack("<BI", CMD_BEGIN, length)):
+        info = app.info()
+        now = time.monotonic()
+        busy = info.state == STATE_ACTIVE and info.error in (ERR_BUSY_FLYING, ERR_BUSY_REVERTING)
+        if not busy and info.state != STATE_SWAPPING:
+            raise UploadError("BEGIN refused: " + info.describe())
+        if busy and info.error == ERR_BUSY_FLYING:
+            if told != ERR_BUSY_FLYING:
+                say("an uploaded blob is flying and holds the slot: the upload waits until the vehicle "
+                    "has landed")
+                next_report = now + report_every_s
+            elif now >= next_report:
+                say(f"still waiting for the landing ({now - start:.0f} s)")
+                next_report = now + report_every_s
+        elif busy and told != ERR_BUSY_REVERTING:
+            say("handing the controller back to the compiled-in blob first")
+        told = info.error if busy else -1
+        if now - start >= wait_landing_s:
+            raise UploadError(f"BEGIN still refused after {wait_landing_s:.0f} s: " + info.describe())
+        time.sleep(poll_s)
+
+
 def upload(
     app: AppMemory,
     blob: bytes,
     say: Callable[[str], None] = print,
     wait_active_s: float = 5.0,
     poll_s: float = 0.1,
+    wait_landing_s: float = 600.0,
 ) -> Info:
-    """BEGIN, the blob at 0x1000 (cflib's 24-byte packets, progress through ``say``), a read-back
-    compared byte for byte, COMMIT, then the info block until the blob flies: returns it. A
-    blob that waits for the landing returns with state "pending". Raises :class:`UploadError`
-    for anything else (nothing is committed unless the read-back matched)."""
+    """BEGIN (:func:`begin`: waits while an uploaded blob flies), the blob at 0x1000 (cflib's
+    24-byte packets, progress through ``say``), a read-back compared byte for byte, COMMIT, then
+    the info block until the blob flies: returns it. A blob that waits for the landing returns
+    with state "pending". Raises :class:`UploadError` for anything else (nothing is committed
+    unless the read-back matched). After the COMMIT only the info block is read: the app decodes
+    the slot's bytes in place, and refuses data reads from the swap on."""
     crc = blob_crc(blob)
     info = app.info()
     if info.magic != INFO_MAGIC or info.layout != LAYOUT_VERSION:
-        raise UploadError(f"app memory is not hamflight's upload layout {LAYOUT_VERSION} (magic {info.magic:08X})")
+        raise UploadError(f"app memory is not hamflight's upload layout {LAYOUT_VERSION} (magic {info.magic:08X}, "
+                          f"layout {info.layout}): flash a matching firmware")
     if len(blob) > info.capacity_bytes:
-        raise UploadError(f"blob of {len(blob)} B, the staging slot holds {info.capacity_bytes} B")
-    if not app.write(CONTROL_ADDR, struct.pack("<BI", CMD_BEGIN, len(blob))):
-        raise UploadError("BEGIN refused (the app is swapping a model: try again)")
+        raise UploadError(f"blob of {len(blob)} B, the slot holds {info.capacity_bytes} B")
+    begin(app, len(blob), say, wait_landing_s, poll_s)
     last = [-1]
 
     def progress(_msg: str, percent: int) -> None:
@@ -756,7 +804,7 @@ def _cmd_upload(args) -> int:
     print(f"{args.blob}: {len(blob)} B, crc {blob_crc(blob):08X}")
     with Link(args.uri, args.timeout_s) as link:
         app = AppMemory.find(link.cf.mem)
-        upload(app, blob, wait_active_s=args.wait_s)
+        upload(app, blob, wait_active_s=args.wait_s, wait_landing_s=args.wait_landing_s)
     return 0
 
 
@@ -851,8 +899,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, metavar="{upload,log,params}")
     u = sub.add_parser(
         "upload", parents=[common], help="write a weight blob into the app's RAM slot; it flies once not airborne",
-        description="Check a weight blob (header, length, CRC), write it into the hamflight app's staging "
-        "slot in RAM, read it back byte for byte, commit it and wait until the app flies it (the app swaps "
+        description="Check a weight blob (header, length, CRC), write it into the hamflight app's "
+        "slot in RAM (waiting for the landing if an uploaded blob flies), read it back byte for byte, commit it and wait until the app flies it (the app swaps "
         "it in only while the vehicle is not airborne; otherwise it is reported pending). RAM only: a reboot "
         "flies the compiled-in blob again.")
     u.add_argument("uri", help=URI_HELP)
@@ -860,6 +908,9 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--wait-s", type=_number("wait", "s", 0.0), default=5.0, metavar="S",
                    help="seconds to wait after the commit for the app to swap the blob in (default 5); a "
                    "vehicle in flight swaps it only after landing, and the blob is then reported pending")
+    u.add_argument("--wait-landing-s", type=_number("wait", "s", 0.0), default=600.0, metavar="S",
+                   help="while an uploaded blob flies, the app takes a new one only on the ground: seconds to "
+                   "wait for the landing before the upload starts (default 600)")
     u.set_defaults(func=_cmd_upload)
     lg = sub.add_parser(
         "log", parents=[common], help="record a flight as host-train import's CSV",

@@ -48,10 +48,18 @@ CAPACITY = 9820
 
 
 class ShimMemory:
-    """The shim's handler: info block, BEGIN/COMMIT, staging slot; records every packet."""
+    """The shim's handler: info block, BEGIN/COMMIT, the slot; records every packet. While an
+    uploaded blob flies (state active) the slot is busy: BEGIN is refused (in flight, error 64;
+    on the ground, error 65 and the compiled-in blob flies again ``revert_after`` reads of the
+    info block later); ``land_after`` refusals in flight, the vehicle lands."""
 
-    def __init__(self, airborne=False, corrupt_at=None):
+    def __init__(self, airborne=False, corrupt_at=None, land_after=None, revert_after=1):
         self.staging = bytearray(CAPACITY)
+        self.holds_bytes = False
+        self.land_after = land_after
+        self.revert_after = revert_after
+        self.reverting = None
+        self.refused = 0
         self.len = 0
         self.state = 0
         self.error = 0
@@ -68,7 +76,13 @@ class ShimMemory:
 
     def info(self):
         b = bytearray(hcf.INFO_BYTES)
-        struct.pack_into("<IHBBIfHB", b, 0, hcf.INFO_MAGIC, 1, self.source, self.state, self.crc, self.mass, 3, self.error)
+        if self.reverting is not None:
+            self.reverting -= 1
+            if self.reverting <= 0:
+                self.reverting = None
+                self.source, self.state = 0, 0
+                self.crc, self.mass = hamflight.Blob.default().crc, hamflight.Blob.default().mass_kg
+        struct.pack_into("<IHBBIfHB", b, 0, hcf.INFO_MAGIC, 2, self.source, self.state, self.crc, self.mass, 3, self.error)
         struct.pack_into("<III", b, 0x14, CAPACITY, self.len, self.staged_crc)
         name = b"uploaded" if self.source else b"default.hfw"
         b[0x20:0x20 + len(name)] = name
@@ -78,7 +92,7 @@ class ShimMemory:
         self.reads.append((addr, n))
         if addr + n <= hcf.INFO_BYTES:
             return self.info()[addr:addr + n]
-        if addr >= hcf.DATA_ADDR and addr - hcf.DATA_ADDR + n <= CAPACITY:
+        if addr >= hcf.DATA_ADDR and addr - hcf.DATA_ADDR + n <= CAPACITY and self.holds_bytes:
             off = addr - hcf.DATA_ADDR
             return bytes(self.staging[off:off + n])
         return None
@@ -90,7 +104,19 @@ class ShimMemory:
                 (n,) = struct.unpack_from("<I", data, 1)
                 if not 0 < n <= CAPACITY or self.state == hcf.STATE_SWAPPING:
                     return False
+                if self.state == hcf.STATE_ACTIVE:
+                    self.refused += 1
+                    if self.airborne:
+                        self.error = hcf.ERR_BUSY_FLYING
+                        if self.land_after is not None and self.refused >= self.land_after:
+                            self.airborne = False
+                    else:
+                        self.error = hcf.ERR_BUSY_REVERTING
+                        if self.reverting is None:
+                            self.reverting = self.revert_after
+                    return False
                 self.staging[:] = bytes(CAPACITY)
+                self.holds_bytes = True
                 self.len, self.state, self.error = n, 1, 0
                 return True
             if data == bytes([hcf.CMD_COMMIT]) and self.state == 1:
@@ -104,7 +130,8 @@ class ShimMemory:
                     return True
                 self.staged_crc = struct.unpack_from("<I", blob, len(blob) - 4)[0]
                 self.state = hcf.STATE_PENDING
-                if not self.airborne:  # the swap at the next tick on the ground
+                if not self.airborne:  # the swap at the next tick on the ground, in place
+                    self.holds_bytes = False
                     self.source, self.crc, self.state = 1, self.staged_crc, hcf.STATE_ACTIVE
                     self.mass = hamflight.Blob.from_bytes(blob).mass_kg
                 return True
@@ -382,3 +409,38 @@ def test_udp_links_ask_for_cflibs_resending():
         assert driver.needs_resending
     finally:
         driver.close()
+
+
+def test_an_upload_while_an_uploaded_blob_flies_waits_for_the_landing():
+    # The uploaded blob holds the slot: in flight BEGIN is refused until the vehicle lands; on
+    # the ground the app hands back to the compiled-in blob, and the retried BEGIN goes through.
+    shim = ShimMemory(airborne=True, land_after=5, revert_after=3)
+    _, app = connect(shim)
+    first = other_blob(0.029)
+    hcf.upload(app, first, say=lambda s: None)
+    assert shim.state == hcf.STATE_PENDING  # in flight: waits for the landing
+    shim.source, shim.crc, shim.state = 1, shim.staged_crc, hcf.STATE_ACTIVE  # landed, swapped, took off
+    shim.holds_bytes = False
+    with pytest.raises(hcf.UploadError, match="Crazyflie refused the read"):
+        app.read(hcf.DATA_ADDR, 24)  # the slot's bytes are decoded in place: no data reads
+    said = []
+    blob = other_blob(0.031)
+    info = hcf.upload(app, blob, say=said.append, poll_s=0.001)
+    crc = struct.unpack_from("<I", blob, len(blob) - 4)[0]
+    assert (info.state, info.source, info.crc) == (hcf.STATE_ACTIVE, 1, crc)
+    assert shim.refused >= 6  # 5 in flight, then at least one on the ground
+    assert any("waits until the vehicle has landed" in s for s in said)
+    assert any("compiled-in blob first" in s for s in said)
+
+
+def test_a_busy_app_times_out_and_another_refusal_is_reported():
+    shim = ShimMemory(airborne=True)
+    _, app = connect(shim)
+    shim.source, shim.state = 1, hcf.STATE_ACTIVE
+    with pytest.raises(hcf.UploadError, match="still refused after 0 s.*upload active"):
+        hcf.upload(app, other_blob(), say=lambda s: None, wait_landing_s=0.0)
+    shim.source, shim.state, shim.error = 0, hcf.STATE_REJECTED, 0
+    orig = shim.write
+    shim.write = lambda addr, data: False if addr == hcf.CONTROL_ADDR else orig(addr, data)
+    with pytest.raises(hcf.UploadError, match="BEGIN refused: active blob"):
+        hcf.upload(app, other_blob(), say=lambda s: None)

@@ -161,6 +161,34 @@ impl<M: HamiltonianModel> FlightController<M> {
         }
     }
 
+    /// [`FlightController::new`] written to `dst` field by field: no whole controller (about
+    /// 1.4 KB with the learned model) passes through the stack, for firmware tasks with small
+    /// stacks. `tests::write_new_is_new` checks it against [`FlightController::new`].
+    ///
+    /// # Safety
+    /// `dst` is valid for writes and aligned. Whatever it held is overwritten without a drop (a
+    /// controller whose model `M` has no drop glue, such as a reference, has none either).
+    pub unsafe fn write_new(dst: *mut Self, model: M, gains: Gains) {
+        let port_active = !model.port().is_identity();
+        // SAFETY: the caller's contract; each field is written through a raw pointer, without
+        // forming a reference to the (possibly uninitialised) controller.
+        unsafe {
+            (&raw mut (*dst).port_active).write(port_active);
+            (&raw mut (*dst).model).write(model);
+            (&raw mut (*dst).gains).write(gains);
+            (&raw mut (*dst).airframe).write(Airframe::default());
+            (&raw mut (*dst).adaptation).write(Adaptation::default());
+            (&raw mut (*dst).comp_prev_n).write(None);
+            (&raw mut (*dst).comp_rate_n_s).write(Vector3::zeros());
+            (&raw mut (*dst).tilt).write(TiltLimit::new(gains.max_tilt_rad));
+            (&raw mut (*dst).shaper).write(SetpointShaper::default());
+            (&raw mut (*dst).u_model).write(None);
+            (&raw mut (*dst).prev_p_m).write(None);
+            (&raw mut (*dst).velocity_correction_m_s).write(Vector3::zeros());
+            (&raw mut (*dst).terms).write(ModelTerms::ZERO);
+        }
+    }
+
     /// The model the controller uses.
     pub fn model(&self) -> &M {
         &self.model
@@ -350,6 +378,36 @@ fn errors_finite(e: &TrackingError) -> bool {
 mod tests {
     use super::actuation::solve_in_order;
     use super::*;
+
+    /// [`FlightController::write_new`] builds what [`FlightController::new`] builds, field for
+    /// field (their `Debug` texts agree), over stale bytes too, and it flies the same.
+    #[test]
+    fn write_new_is_new() {
+        use crate::model::NominalModel;
+        let model = NominalModel::default();
+        let gains = Gains::default();
+        let mut made = core::mem::MaybeUninit::<FlightController<NominalModel>>::uninit();
+        // SAFETY: stale bytes (0xA5) in place of the controller: written over, not read.
+        unsafe {
+            made.as_mut_ptr()
+                .cast::<u8>()
+                .write_bytes(0xA5, core::mem::size_of_val(&made))
+        };
+        // SAFETY: valid for writes and aligned.
+        unsafe { FlightController::write_new(made.as_mut_ptr(), model, gains) };
+        // SAFETY: every field written above.
+        let mut made = unsafe { made.assume_init() };
+        let mut new = FlightController::new(model, gains);
+        assert_eq!(format!("{made:?}"), format!("{new:?}"));
+        let s = State::default();
+        let sp = Setpoint::hover(Vector3::new(0.1, -0.2, 0.3), 0.2);
+        for _ in 0..10 {
+            assert_eq!(
+                format!("{:?}", made.step(&s, &sp, 0.002)),
+                format!("{:?}", new.step(&s, &sp, 0.002))
+            );
+        }
+    }
 
     /// The in-order elimination solves a near-diagonal G as the inverse does, and hands a G
     /// whose pivots collapse (a permutation, a singular or non-finite G) back to the inverse.

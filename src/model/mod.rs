@@ -162,7 +162,13 @@ pub type DisturbanceNet = Mlp<DIST_IN, HIDDEN, DIST_OUT>;
 
 /// What the weight blob carries: the vehicle's known mass and all learned parameters θ (J⁻¹, g)
 /// and φ (W).
+///
+/// `repr(C)`, fields in blob order: its memory is the mass then every network parameter in
+/// [`ModelWeights::params_mut`] order, f32 each with no padding ([`ModelWeights::BYTES`]), the
+/// order of the blob's body after its motor lag and port terms. A firmware may therefore decode
+/// a blob in place by moving the parameter bytes (`hf_model_load` of the Bitcraze app).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[repr(C)]
 pub struct ModelWeights {
     /// The vehicle's mass m (kg), known and given at training (paper Sec. 4: M = diag(m I, J)).
     /// One firmware image flies any vehicle: the controller's gains and the W force columns scale
@@ -175,6 +181,11 @@ pub struct ModelWeights {
     /// φ: the disturbance features.
     pub disturbance: DisturbanceNet,
 }
+
+const _: () = {
+    assert!(core::mem::size_of::<ModelWeights>() == ModelWeights::BYTES);
+    assert!(core::mem::align_of::<ModelWeights>() == core::mem::align_of::<f32>());
+};
 
 impl Default for ModelWeights {
     /// All-zero networks on the stock vehicle's mass ([`MASS_KG`]).
@@ -195,6 +206,9 @@ impl ModelWeights {
 
     /// Number of parameters (f32) of the three networks.
     pub const PARAMS: usize = InertiaNet::PARAMS + GainNet::PARAMS + DisturbanceNet::PARAMS;
+
+    /// Size in memory: the mass and [`ModelWeights::PARAMS`] f32s, no padding (asserted).
+    pub const BYTES: usize = 4 * (1 + Self::PARAMS);
 
     /// Every bit zero, the mass too: a place to decode a blob into ([`crate::blob::decode_into`]
     /// sets every field), not a model to fly. All-zero keeps a `static` of it in `.bss`; a
@@ -226,5 +240,33 @@ impl ModelWeights {
             .params_mut()
             .chain(self.gain.params_mut())
             .chain(self.disturbance.params_mut())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ModelWeights;
+
+    /// The memory of [`ModelWeights`] is the mass then the parameters in `params_mut()` order.
+    #[test]
+    fn weights_memory_is_the_mass_then_the_params_in_blob_order() {
+        let mut w = ModelWeights::ZERO;
+        w.mass_kg = -1.0;
+        for (i, p) in w.params_mut().enumerate() {
+            *p = i as f32;
+        }
+        assert_eq!(core::mem::size_of_val(&w), ModelWeights::BYTES);
+        // SAFETY: `w` is `BYTES` bytes of f32s (asserted above and at compile time), aligned for
+        // f32, and only read while the slice lives.
+        let mem = unsafe {
+            core::slice::from_raw_parts(
+                (&w as *const ModelWeights).cast::<f32>(),
+                1 + ModelWeights::PARAMS,
+            )
+        };
+        assert_eq!(mem[0], -1.0);
+        for (i, v) in mem[1..].iter().enumerate() {
+            assert_eq!(*v, i as f32, "parameter {i}");
+        }
     }
 }

@@ -36,7 +36,7 @@ extern "C" {
 #define HF_FEATURES 6
 
 /* Bytes of opaque storage a controller needs (the Rust side asserts its state fits). */
-#define HF_CONTROLLER_STORAGE_BYTES 1536
+#define HF_CONTROLLER_STORAGE_BYTES 1504
 
 /* ---- Fault and condition flags (hf_output_t.faults, hf_last_faults) ----
  * Any bit of HF_FAULT_MASK means the output is a zero wrench (motors off).
@@ -75,8 +75,8 @@ extern "C" {
 
 /* The largest weight blob this build reads (a current-version one), bytes. */
 #define HF_BLOB_MAX_BYTES 9820u
-/* Bytes of storage a model received at run time needs (its decoded networks). */
-#define HF_MODEL_STORAGE_BYTES 9804
+/* Bytes of the upload slot (hf_model_t): max(HF_BLOB_MAX_BYTES, the decoded model), 8-aligned. */
+#define HF_MODEL_STORAGE_BYTES 9824
 
 /* Adaptation laws (hf_set_law). */
 #define HF_LAW_GRADIENT 0u   /* the paper's gradient law on the tracking errors */
@@ -142,8 +142,11 @@ typedef struct hf_composite {
   float r_torque;  /* measurement variance R of the torque rows, per sample (> 0) */
 } hf_composite_t;
 
-/* Storage for a model received at run time (hf_model_load). Zeroed (static storage is): empty.
- * It must outlive every controller that flies it (a static of the shim). */
+/* The slot of a model received at run time: first the blob's bytes (write them into opaque[]),
+ * then the model hf_model_load decodes from them in place. HF_MODEL_STORAGE_BYTES is the larger
+ * of HF_BLOB_MAX_BYTES and the decoded model, 8-byte aligned. Zeroed (static storage is): empty.
+ * It must outlive every controller that flies it (a static of the shim), and its bytes may be
+ * written only while no controller flies it. */
 typedef struct hf_model {
   _Alignas(8) uint8_t opaque[HF_MODEL_STORAGE_BYTES];
 } hf_model_t;
@@ -206,9 +209,11 @@ void hf_get_estimate(const hf_controller_t *ctl, float a[HF_FEATURES]);
 /* The faults and conditions of the last hf_step (HF_FAULT_NOT_INIT if none or not initialised). */
 uint32_t hf_last_faults(const hf_controller_t *ctl);
 
-/* One hover step on a scratch controller: true if it has no fault and its thrust is within 20 %
- * of m*g. The shim's worker task runs it once when it starts. */
-bool hf_self_test(void);
+/* One hover step of ctl itself with its model's default gains: true if it has no fault and its
+ * thrust is within 20 % of m*g. Then ctl's gains are restored and a = 0. False if ctl is not
+ * initialised. Only while nothing else steps ctl (the shim: in its app task, before the
+ * stabilizer may use ctl, and in a swap). Needs a step's stack, no scratch controller. */
+bool hf_self_test(hf_controller_t *ctl);
 
 /* The compiled-in weight blob: its file name (NUL-terminated) and its body CRC-32 (IEEE). */
 const char *hf_model_name(void);
@@ -225,15 +230,17 @@ float hf_mass_kg(void);
  * stack: the shim runs it in the memory task. HF_OK or an HF_ERR_BLOB_* code. */
 uint32_t hf_blob_check(const uint8_t *bytes, uint32_t len, hf_blob_info_t *info);
 
-/* Decodes the blob into *model, in place, then runs the self test (hf_self_test's hover step)
- * on it: HF_OK, an HF_ERR_BLOB_* code or HF_ERR_SELF_TEST. On any error *model is left empty
- * (no controller may fly it). *model must not be in use by a controller. Needs the self test's
- * stack (~2.2 KB): the shim runs it in its worker task. */
-uint32_t hf_model_load(hf_model_t *model, const uint8_t *bytes, uint32_t len, hf_blob_info_t *info);
+/* Decodes the blob held in the first len bytes of model->opaque, in place: every check of
+ * hf_blob_check first, then the parameter block is moved down to where the model keeps it and
+ * the scalars are written. HF_OK or an HF_ERR_BLOB_* code; on any error *model is left empty
+ * (no controller may fly it) and the blob's bytes are gone. *model must not be in use by a
+ * controller. No self test: hf_use_model runs it. */
+uint32_t hf_model_load(hf_model_t *model, uint32_t len, hf_blob_info_t *info);
 
-/* Flies ctl with *model (NULL: the compiled-in model): the gains become the new model's
- * defaults for its mass (hf_get_gains gives them), the law, the composite tuning and the
- * adaptation switch are kept, a = 0. HF_OK, or HF_ERR_NULL (ctl not initialised, or *model
+/* Flies ctl with *model (NULL: the compiled-in model), then runs hf_self_test on ctl: the gains
+ * become the new model's defaults for its mass (hf_get_gains gives them), the law, the composite
+ * tuning and the adaptation switch are kept, a = 0. HF_OK; HF_ERR_SELF_TEST if the self test
+ * failed (ctl then flies the compiled-in model); HF_ERR_NULL (ctl not initialised, or *model
  * empty) with ctl unchanged. Only while not flying. */
 uint32_t hf_use_model(hf_controller_t *ctl, const hf_model_t *model);
 

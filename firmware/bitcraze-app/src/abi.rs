@@ -10,10 +10,11 @@ use nalgebra::{Matrix3, Vector3};
 /// `HF_FEATURES`.
 pub const FEATURES: usize = hamflight::model::FEATURES;
 /// `HF_CONTROLLER_STORAGE_BYTES`.
-pub const CONTROLLER_STORAGE_BYTES: usize = 1536;
+pub const CONTROLLER_STORAGE_BYTES: usize = 1504;
 
-/// `HF_MODEL_STORAGE_BYTES`: an uploaded model's storage (the decoded networks, ~9.7 KB).
-pub const MODEL_STORAGE_BYTES: usize = 9804;
+/// `HF_MODEL_STORAGE_BYTES`: the upload slot, first the blob's bytes, then the model decoded
+/// from them in place (the larger of the two, 8-byte aligned; asserted in `lib.rs`).
+pub const MODEL_STORAGE_BYTES: usize = 9824;
 /// `HF_BLOB_MAX_BYTES`: the largest weight blob (a current-version one).
 pub const BLOB_MAX_BYTES: usize = hamflight::blob::MAX_LEN;
 

@@ -25,7 +25,7 @@ extern crate std;
 pub mod abi;
 
 use abi::{HfBlobInfo, HfComposite, HfController, HfGains, HfModel, HfOutput, HfSetpoint, HfState};
-use hamflight::model::{HamiltonianModel, LearnedModel, GRAVITY_M_S2};
+use hamflight::model::{HamiltonianModel, LearnedModel, ModelWeights, GRAVITY_M_S2};
 use hamflight::{FlightController, Gains, Measurement, Output, Setpoint, State, VehicleFacts};
 
 /// The compiled-in weights: `MODEL`, `MODEL_NAME`, `MODEL_NAME_NUL`, `MODEL_CRC`.
@@ -68,13 +68,22 @@ impl Inner {
     }
 }
 
-/// Marks a loaded, self-tested [`ModelInner`] ("HFMD").
+const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Marks a loaded (decoded and checked) [`ModelInner`] ("HFMD").
 const MODEL_MAGIC: u32 = 0x4846_4D44;
 
-/// What lives in a [`HfModel`]'s storage.
+/// What lives in a [`HfModel`]'s storage once loaded (before: the blob's bytes). `repr(C)`: the
+/// first network parameter is at the constant [`PARAMS_AT`].
 #[repr(C)]
 struct ModelInner {
-    /// [`MODEL_MAGIC`] once loaded and self-tested; zeroed storage reads 0.
+    /// [`MODEL_MAGIC`] once loaded; zeroed storage reads 0.
     magic: u32,
     /// Every bit pattern of these f32/u32 fields is a valid model (zero bytes are
     /// `LearnedModel::new(ModelWeights::ZERO)`), so it is decoded in place.
@@ -83,6 +92,13 @@ struct ModelInner {
 
 const _: () = {
     assert!(core::mem::size_of::<ModelInner>() <= abi::MODEL_STORAGE_BYTES);
+    // The slot holds the upload's bytes, then the model decoded from them in place: the larger
+    // of the two, rounded up to its 8-byte alignment, and no more.
+    assert!(abi::BLOB_MAX_BYTES <= abi::MODEL_STORAGE_BYTES);
+    assert!(
+        abi::MODEL_STORAGE_BYTES
+            == max(abi::BLOB_MAX_BYTES, core::mem::size_of::<ModelInner>()).div_ceil(8) * 8
+    );
     assert!(core::mem::align_of::<ModelInner>() <= core::mem::align_of::<HfModel>());
     assert!(core::mem::size_of::<Inner>() <= abi::CONTROLLER_STORAGE_BYTES);
     assert!(core::mem::align_of::<Inner>() <= core::mem::align_of::<HfController>());
@@ -116,27 +132,74 @@ unsafe fn inner_ref<'a>(p: *const HfController) -> Option<&'a Inner> {
 
 /// `hf_init`: the compiled-in model, default gains, adaptation on, a = 0. NULL is ignored.
 ///
+/// Built in place, field by field: no whole [`Inner`] passes through the stack (the app task's
+/// stack is sized by its deepest call).
+///
 /// # Safety
-/// `ctl` is null or points to writable `hf_controller_t` storage.
+/// `ctl` is null or points to writable `hf_controller_t` storage that nothing else accesses
+/// meanwhile.
 #[no_mangle]
 pub unsafe extern "C" fn hf_init(ctl: *mut HfController) {
     if ctl.is_null() {
         return;
     }
-    let inner = Inner {
-        magic: MAGIC,
-        last_faults: abi::FAULT_NOT_INIT,
-        ctl: FlightController::new(
-            &model::MODEL,
-            Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
-        ),
-        state: State::default(),
-        setpoint: Setpoint::default(),
-        meas: Measurement::default(),
-        out: Output::default(),
-    };
-    // SAFETY: non-null, writable and large and aligned enough (asserted above).
-    unsafe { ctl.cast::<Inner>().write(inner) };
+    let p = ctl.cast::<Inner>();
+    let facts = facts_of(&model::MODEL);
+    // SAFETY: non-null, writable, large and aligned enough for an Inner (asserted above) and
+    // exclusive by the contract.
+    unsafe { init_at(p, &facts) };
+}
+
+/// [`hf_init`]'s writes, each field through a raw pointer (no reference to the partly built
+/// Inner), the magic last, so no reader sees a half-built controller as one. Out of line: the
+/// fields' temporaries are not in [`hf_init`]'s frame while it runs the model.
+///
+/// # Safety
+/// `p` is valid for writes, aligned and exclusive.
+#[inline(never)]
+unsafe fn init_at(p: *mut Inner, facts: &VehicleFacts) {
+    // SAFETY: the caller's contract.
+    unsafe {
+        (&raw mut (*p).magic).write(0);
+        (&raw mut (*p).last_faults).write(abi::FAULT_NOT_INIT);
+        build(&raw mut (*p).ctl, &model::MODEL, facts, false);
+        (&raw mut (*p).state).write(State::default());
+        (&raw mut (*p).setpoint).write(Setpoint::default());
+        (&raw mut (*p).meas).write(Measurement::default());
+        (&raw mut (*p).out).write(Output::default());
+        (&raw mut (*p).magic).write(MAGIC);
+    }
+}
+
+/// `m`'s vehicle facts. Out of line, with nothing but pointers in its callers' frames: it runs
+/// the model, the deepest call of the app task besides a step.
+#[inline(never)]
+fn facts_of(m: &LearnedModel) -> VehicleFacts {
+    VehicleFacts::of(m)
+}
+
+/// Writes `FlightController::new(m, gains for facts)` to `c`, in place
+/// ([`FlightController::write_new`]: no 1.4 KB temporary on the stack). With `keep`, the law,
+/// the composite tuning and the adaptation switch of the controller at `c` are kept.
+///
+/// # Safety
+/// `c` is valid for writes and aligned, and initialised if `keep`; whatever it held is
+/// overwritten without a drop (the controller has no drop glue).
+#[inline(never)]
+unsafe fn build(
+    c: *mut FlightController<&'static LearnedModel>,
+    m: &'static LearnedModel,
+    facts: &VehicleFacts,
+    keep: bool,
+) {
+    let mut gains = Gains::for_vehicle(facts);
+    if keep {
+        // SAFETY: initialised if `keep` (the caller's contract).
+        let cur = unsafe { &(*c).gains };
+        (gains.law, gains.composite, gains.adapt) = (cur.law, cur.composite, cur.adapt);
+    }
+    // SAFETY: the caller's contract.
+    unsafe { FlightController::write_new(c, m, gains) };
 }
 
 /// `hf_reset`: a = 0.
@@ -392,18 +455,53 @@ pub unsafe extern "C" fn hf_last_faults(ctl: *const HfController) -> u32 {
     unsafe { inner_ref(ctl) }.map_or(abi::FAULT_NOT_INIT, |i| i.last_faults)
 }
 
-/// `hf_self_test`: one hover step on a scratch controller gives no fault and m g ± 20 %.
+/// `hf_self_test`: one hover step of `ctl` itself, with its gains: no fault and thrust m g ±
+/// 20 %; then a = 0. False if `ctl` is not initialised. The shim runs it right after `hf_init`
+/// and `hf_use_model` gave the controller its model's default gains.
+///
+/// # Safety
+/// `ctl` as for [`hf_step`] (the caller owns it: no step runs meanwhile).
 #[no_mangle]
-pub extern "C" fn hf_self_test() -> bool {
-    self_test(&model::MODEL)
+pub unsafe extern "C" fn hf_self_test(ctl: *mut HfController) -> bool {
+    // SAFETY: the caller's contract.
+    unsafe { inner_mut(ctl) }.is_some_and(self_test)
 }
 
-/// One hover step of `model` on a scratch controller: no fault, thrust m g ± 20 %.
-fn self_test(model: &LearnedModel) -> bool {
-    let weight_n = model.mass_kg() * GRAVITY_M_S2;
-    let mut ctl = FlightController::new(model, Gains::for_vehicle(&VehicleFacts::of(model)));
-    let o = ctl.step(&State::default(), &Setpoint::default(), 0.002);
-    !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n
+/// One hover step of the controller in `inner` (no scratch controller: the stack holds only
+/// the step): no fault, thrust m g ± 20 %. The step's traces go: a = 0, no last output.
+#[inline(never)]
+fn self_test(inner: &mut Inner) -> bool {
+    let weight_n = inner.ctl.model().mass_kg() * GRAVITY_M_S2;
+    inner.ctl.reset();
+    hover_inputs(inner);
+    inner.ctl.step_into(
+        &inner.state,
+        &inner.setpoint,
+        &inner.meas,
+        0.002,
+        &mut inner.out,
+    );
+    let o = &inner.out;
+    let ok = !o.faults.is_fault() && (o.wrench.thrust_n - weight_n).abs() <= 0.2 * weight_n;
+    inner.ctl.reset();
+    clear_output(inner);
+    ok
+}
+
+/// The self test's inputs: at rest at the origin, hover there. Out of line: the temporaries
+/// are off the stack before the step runs.
+#[inline(never)]
+fn hover_inputs(inner: &mut Inner) {
+    inner.state = State::default();
+    inner.setpoint = Setpoint::default();
+    inner.meas = Measurement::default();
+}
+
+/// No last output (after the self test).
+#[inline(never)]
+fn clear_output(inner: &mut Inner) {
+    inner.out = Output::default();
+    inner.last_faults = abi::FAULT_NOT_INIT;
 }
 
 /// `bytes[..len]`, if `bytes` is non-null.
@@ -438,41 +536,86 @@ pub unsafe extern "C" fn hf_blob_check(bytes: *const u8, len: u32, info: *mut Hf
     }
 }
 
-/// `hf_model_load`: decode in place into `*model` and self-test it; empty on any error.
+/// Where the first network parameter lives in a loaded [`HfModel`]: after the magic and the
+/// mass (`LearnedModel` starts with its `ModelWeights`, whose memory is the mass then the
+/// parameters in blob order; both `repr(C)`, asserted in the core).
+const PARAMS_AT: usize =
+    core::mem::offset_of!(ModelInner, model) + core::mem::offset_of!(ModelWeights, inertia);
+/// Bytes of the network parameters, in the blob and in memory alike.
+const PARAMS_BYTES: usize = 4 * ModelWeights::PARAMS;
+
+const _: () = {
+    // The blob's parameters are little-endian f32s: moved as bytes, they are the f32s only on a
+    // little-endian target (the Cortex-M4 and the hosts are).
+    assert!(cfg!(target_endian = "little"));
+    assert!(core::mem::offset_of!(ModelWeights, mass_kg) == 0);
+    assert!(core::mem::offset_of!(ModelWeights, inertia) == 4);
+    // The parameters move down (to PARAMS_AT from at least the header's end, where a version-1
+    // blob's start), and end inside the model.
+    assert!(PARAMS_AT <= hamflight::blob::HEADER_LEN);
+    assert!(PARAMS_AT + PARAMS_BYTES <= core::mem::size_of::<ModelInner>());
+};
+
+/// `hf_model_load`: decode, in place, the blob held in the first `len` bytes of `*model`; empty
+/// on any error.
+///
+/// Every check of [`hf_blob_check`] runs on the bytes first. Then the header's scalars and port
+/// terms are copied out, the parameter block is moved (memmove) from its offset in the blob down
+/// to where [`LearnedModel`] keeps it ([`PARAMS_AT`]), and the scalars, the port terms and the
+/// magic are written. No self test here: [`hf_use_model`] runs it on the controller that flies it.
 ///
 /// # Safety
-/// `model` null or valid writable `hf_model_t` storage that no controller flies; `bytes` null
-/// or valid for `len` bytes; `info` null or writable.
+/// `model` null or valid writable `hf_model_t` storage that nothing else reads or writes
+/// meanwhile (no controller flies it); `info` null or writable.
 #[no_mangle]
 pub unsafe extern "C" fn hf_model_load(
     model: *mut HfModel,
-    bytes: *const u8,
     len: u32,
     info: *mut HfBlobInfo,
 ) -> u32 {
-    // SAFETY: the caller's contract.
-    let Some(bytes) = (unsafe { byte_slice(bytes, len) }) else {
-        return abi::ERR_NULL;
-    };
     if model.is_null() {
         return abi::ERR_NULL;
     }
-    let inner = model.cast::<ModelInner>();
-    // SAFETY: non-null, aligned and large enough (asserted above), exclusive by the contract.
-    // Every field is an f32 or a u32, so any bytes (zeroed or stale) are a valid ModelInner.
-    let inner = unsafe { &mut *inner };
-    inner.magic = 0;
-    let checked = match hamflight::blob::check(bytes) {
-        Ok(i) => i,
-        Err(e) => return abi::blob_error_code(e),
+    let Ok(len) = usize::try_from(len) else {
+        return abi::ERR_BLOB_TRAILING;
     };
-    if let Err(e) = hamflight::blob::decode_model_into(bytes, &mut inner.model) {
-        return abi::blob_error_code(e);
+    if len > abi::MODEL_STORAGE_BYTES {
+        // Longer than the slot, so longer than any blob.
+        return abi::ERR_BLOB_TRAILING;
     }
-    if !self_test(&inner.model) {
-        return abi::ERR_SELF_TEST;
-    }
-    inner.magic = MODEL_MAGIC;
+    let base = model.cast::<u8>();
+    let inner = model.cast::<ModelInner>();
+    // SAFETY (whole function): `model` is non-null, aligned for a ModelInner and large enough
+    // (asserted above), initialised (static storage is zeroed, then written as bytes) and
+    // exclusive by the contract. The bytes are first read through a shared slice that ends with
+    // the check; then they are moved through raw pointers; only then is the one `&mut
+    // ModelInner` formed. No `&[u8]` and `&mut ModelInner` over the slot are ever alive at once.
+    // Every bit pattern is a valid ModelInner (f32 and u32 fields only).
+    let checked = {
+        // SAFETY: see above; `len` <= the storage's size.
+        let bytes = unsafe { core::slice::from_raw_parts(base.cast_const(), len) };
+        hamflight::blob::check(bytes)
+    };
+    let checked = match checked {
+        Ok(i) => i,
+        Err(e) => {
+            // SAFETY: see above.
+            unsafe { (&raw mut (*inner).magic).write(0) };
+            return abi::blob_error_code(e);
+        }
+    };
+    // The parameters are the body's last PARAMS_BYTES, before the CRC, in every version.
+    let from = checked.total_len - hamflight::blob::CRC_LEN - PARAMS_BYTES;
+    // SAFETY: see above; `from + PARAMS_BYTES <= len` (the check passed) and `PARAMS_AT +
+    // PARAMS_BYTES <= size_of::<ModelInner>()` (asserted); `copy` is a memmove.
+    unsafe { core::ptr::copy(base.add(from), base.add(PARAMS_AT), PARAMS_BYTES) };
+    // SAFETY: see above: no other reference to the slot is alive.
+    let m = unsafe { &mut *inner };
+    m.magic = 0;
+    m.model.weights.mass_kg = checked.mass_kg;
+    m.model.set_motor_tau_s(checked.motor_tau_s);
+    m.model.set_port(checked.port);
+    m.magic = MODEL_MAGIC;
     // SAFETY: the caller's contract.
     if let Some(out) = unsafe { info.as_mut() } {
         *out = HfBlobInfo::from_core(&checked);
@@ -480,11 +623,13 @@ pub unsafe extern "C" fn hf_model_load(
     abi::OK
 }
 
-/// `hf_use_model`: fly `ctl` with `*model` (null: the compiled-in one), gains for its mass.
+/// `hf_use_model`: fly `ctl` with `*model` (null: the compiled-in one), gains for its mass,
+/// after the self test ([`hf_self_test`]) on `ctl` itself. If the test fails, `ctl` flies the
+/// compiled-in model and `HF_ERR_SELF_TEST` is returned.
 ///
 /// # Safety
 /// `ctl` as for [`hf_step`]; `model` null or a `hf_model_t` that lives as long as `ctl` flies it
-/// and is not loaded into meanwhile (the shim's static, reloaded only after switching away).
+/// and is not written meanwhile (the shim's static, written only after switching away).
 #[no_mangle]
 pub unsafe extern "C" fn hf_use_model(ctl: *mut HfController, model: *const HfModel) -> u32 {
     // SAFETY: the caller's contract.
@@ -503,15 +648,22 @@ pub unsafe extern "C" fn hf_use_model(ctl: *mut HfController, model: *const HfMo
         }
         &mi.model
     };
-    let cur = inner.ctl.gains;
-    let gains = Gains {
-        law: cur.law,
-        composite: cur.composite,
-        adapt: cur.adapt,
-        ..Gains::for_vehicle(&VehicleFacts::of(m))
-    };
-    inner.ctl = FlightController::new(m, gains);
-    abi::OK
+    fly(inner, m);
+    if self_test(inner) {
+        return abi::OK;
+    }
+    if !model.is_null() {
+        fly(inner, &model::MODEL);
+    }
+    abi::ERR_SELF_TEST
+}
+
+/// `inner` flies `m`: default gains for its mass, the law, the composite tuning and the
+/// adaptation switch kept, a = 0. Built in place.
+fn fly(inner: &mut Inner, m: &'static LearnedModel) {
+    let facts = facts_of(m);
+    // SAFETY: a valid, aligned, exclusive, initialised field (no drop glue).
+    unsafe { build(&raw mut inner.ctl, m, &facts, true) };
 }
 
 /// `hf_model_name`: the blob's file name, NUL-terminated, static.

@@ -199,7 +199,9 @@ fn compiled_in_model_is_the_blob() {
 
 #[test]
 fn self_test_passes_and_mass_is_the_blobs() {
-    assert!(hf_self_test());
+    let mut c = init();
+    // SAFETY: valid storage.
+    assert!(unsafe { hf_self_test(&mut c) });
     let path = env!("HAMFLIGHT_BLOB_PATH");
     let bytes = std::fs::read(path).unwrap();
     let from_blob = hamflight::blob::decode(&bytes).expect("a valid blob");
@@ -351,6 +353,80 @@ fn blob_check_reports_the_blob_and_each_refusal() {
     }
 }
 
+/// Copies `blob` into the slot (as the shim's upload does) and decodes it there.
+///
+/// # Safety
+/// `info` null or writable.
+unsafe fn load(slot: &mut HfModel, blob: &[u8], info: *mut HfBlobInfo) -> u32 {
+    slot.opaque[..blob.len()].copy_from_slice(blob);
+    // SAFETY: valid storage, exclusive; the caller's contract for `info`.
+    unsafe { hf_model_load(slot, blob.len() as u32, info) }
+}
+
+/// The model decoded in the slot.
+fn loaded(slot: &HfModel) -> &LearnedModel {
+    // SAFETY: aligned and large enough (asserted in lib.rs); any bytes are a ModelInner.
+    let mi = unsafe { &*(slot as *const HfModel).cast::<ModelInner>() };
+    assert_eq!(mi.magic, MODEL_MAGIC);
+    &mi.model
+}
+
+/// The shipped (version 4) blob rewritten as format `version` (1 to 3): the fields that version
+/// lacks dropped, the header and the CRC made right.
+fn as_version(blob: &[u8], version: u16) -> std::vec::Vec<u8> {
+    use hamflight::blob::{crc32, CRC_LEN, HEADER_LEN};
+    let body = &blob[HEADER_LEN..blob.len() - CRC_LEN];
+    let params = &body[4 * (2 + 27)..];
+    let mut new_body = std::vec::Vec::new();
+    if version >= 2 {
+        new_body.extend_from_slice(&body[..4]);
+    }
+    if version >= 3 {
+        new_body.extend_from_slice(&body[4..8]);
+    }
+    new_body.extend_from_slice(params);
+    let mut out = blob[..HEADER_LEN].to_vec();
+    out[4..6].copy_from_slice(&version.to_le_bytes());
+    out[24..28].copy_from_slice(&(new_body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&new_body);
+    out.extend_from_slice(&crc32(&new_body).to_le_bytes());
+    out
+}
+
+#[test]
+fn a_blob_decodes_in_place_as_the_core_decodes_it_in_every_version() {
+    let (_, v4) = other_blob();
+    // Parameters 0, 1, 2, ... (scaled: finite, distinct): a moved or misordered one shows.
+    let counting = edited_blob(|body| {
+        for (i, c) in body[4 * (2 + 27)..].chunks_exact_mut(4).enumerate() {
+            c.copy_from_slice(&((i % 1000) as f32 * 1e-3).to_le_bytes());
+        }
+    });
+    let mut c = LearnedModel::from_blob(&counting).unwrap();
+    let mut n = 0;
+    for (i, p) in c.weights.params_mut().enumerate() {
+        assert_eq!(*p, (i % 1000) as f32 * 1e-3);
+        n += 1;
+    }
+    assert_eq!(n, hamflight::model::ModelWeights::PARAMS);
+    let mut slot = model_storage();
+    for blob in [
+        v4.clone(),
+        counting,
+        as_version(&v4, 3),
+        as_version(&v4, 2),
+        as_version(&v4, 1),
+    ] {
+        let want = LearnedModel::from_blob(&blob).unwrap();
+        let mut info = HfBlobInfo::default();
+        // Stale bytes of the last model in the slot must not matter.
+        // SAFETY: valid pointers.
+        assert_eq!(unsafe { load(&mut slot, &blob, &mut info) }, OK);
+        assert_eq!(loaded(&slot), &want);
+        assert_eq!(info.total_len_bytes as usize, blob.len());
+    }
+}
+
 #[test]
 fn a_loaded_model_flies_bit_for_bit_as_the_native_controller_and_can_be_left() {
     let (m, blob) = other_blob();
@@ -364,10 +440,8 @@ fn a_loaded_model_flies_bit_for_bit_as_the_native_controller_and_can_be_left() {
             ERR_NULL,
             "an empty slot is refused"
         );
-        assert_eq!(
-            hf_model_load(&mut *slot, blob.as_ptr(), blob.len() as u32, &mut info),
-            OK
-        );
+        assert_eq!(load(&mut slot, &blob, &mut info), OK);
+        assert_eq!(info.mass_kg, 0.031);
         assert_eq!(hf_set_law(&mut c, LAW_COMPOSITE), OK);
         assert_eq!(hf_use_model(&mut c, &*slot), OK);
         assert_eq!(hf_get_law(&c), LAW_COMPOSITE, "the law is kept");
@@ -411,24 +485,65 @@ fn a_loaded_model_flies_bit_for_bit_as_the_native_controller_and_can_be_left() {
         // A bad blob leaves the slot empty: nothing can fly it.
         let mut bad = blob.clone();
         bad[60] ^= 1;
-        assert_eq!(
-            hf_model_load(&mut *slot, bad.as_ptr(), bad.len() as u32, &mut info),
-            ERR_BLOB_CRC
-        );
+        assert_eq!(load(&mut slot, &bad, &mut info), ERR_BLOB_CRC);
         assert_eq!(hf_use_model(&mut c, &*slot), ERR_NULL);
+        assert_eq!(hf_model_load(ptr::null_mut(), 1, &mut info), ERR_NULL);
         assert_eq!(
-            hf_model_load(ptr::null_mut(), blob.as_ptr(), 1, &mut info),
-            ERR_NULL
+            hf_model_load(&mut *slot, MODEL_STORAGE_BYTES as u32 + 1, &mut info),
+            ERR_BLOB_TRAILING,
+            "longer than the slot"
         );
         assert_eq!(hf_use_model(ptr::null_mut(), ptr::null()), ERR_NULL);
     }
 }
 
 #[test]
-fn a_blob_that_fails_the_self_test_is_not_loaded() {
-    // Valid in every format check, but every network parameter zero (after the mass and the
-    // motor lag): no input gain, so no thrust.
-    let blob = edited_blob(|body| body[8..].fill(0));
+fn the_self_test_steps_the_controller_and_leaves_no_trace() {
+    let mut c = init();
+    let (s, sp) = (displaced(), hover_sp());
+    // SAFETY: valid pointers.
+    unsafe {
+        hf_set_adapt(&mut c, true);
+        let mut g = HfGains::default();
+        hf_get_gains(&c, &mut g);
+        g.k_p *= 1.5;
+        assert_eq!(hf_set_gains(&mut c, &g), OK);
+        for _ in 0..50 {
+            step(&mut c, &s, &sp, 0.002);
+        }
+        assert!(estimate(&c).iter().any(|v| *v != 0.0));
+        assert!(hf_self_test(&mut c));
+        assert_eq!(estimate(&c), [0.0; FEATURES], "a = 0 after the test");
+        let mut back = HfGains::default();
+        hf_get_gains(&c, &mut back);
+        assert_eq!(back, g, "the gains are kept");
+        assert!(hf_get_adapt(&c));
+        assert!(!hf_self_test(ptr::null_mut()));
+        let mut z = zeroed();
+        assert!(!hf_self_test(&mut z));
+    }
+    // After the test it steps as a fresh controller with those gains.
+    let mut fresh = init();
+    // SAFETY: valid pointers.
+    unsafe {
+        let mut g = HfGains::default();
+        hf_get_gains(&c, &mut g);
+        assert_eq!(hf_set_gains(&mut fresh, &g), OK);
+        hf_set_adapt(&mut fresh, true);
+    }
+    for _ in 0..5 {
+        assert_eq!(
+            step(&mut c, &s, &sp, 0.002),
+            step(&mut fresh, &s, &sp, 0.002)
+        );
+    }
+}
+
+#[test]
+fn a_blob_that_fails_the_self_test_does_not_fly() {
+    // Valid in every format check, but every network parameter zero (after the mass, the
+    // motor lag and the port terms): no input gain, so no thrust.
+    let blob = edited_blob(|body| body[4 * (2 + 27)..].fill(0));
     let mut slot = model_storage();
     // SAFETY: valid pointers.
     unsafe {
@@ -436,14 +551,21 @@ fn a_blob_that_fails_the_self_test_is_not_loaded() {
             hf_blob_check(blob.as_ptr(), blob.len() as u32, ptr::null_mut()),
             OK
         );
-        let r = hf_model_load(
-            &mut *slot,
-            blob.as_ptr(),
-            blob.len() as u32,
-            ptr::null_mut(),
-        );
-        assert_eq!(r, ERR_SELF_TEST);
+        assert_eq!(load(&mut slot, &blob, ptr::null_mut()), OK);
         let mut c = init();
-        assert_eq!(hf_use_model(&mut c, &*slot), ERR_NULL);
+        assert_eq!(hf_use_model(&mut c, &*slot), ERR_SELF_TEST);
+        // The compiled-in model flies: its hover thrust.
+        let out = step(
+            &mut c,
+            &HfState::from_core(&State::default()),
+            &HfSetpoint::default(),
+            0.002,
+        );
+        let mut builtin = FlightController::new(
+            &model::MODEL,
+            Gains::for_vehicle(&VehicleFacts::of(&model::MODEL)),
+        );
+        let o = builtin.step(&State::default(), &Setpoint::default(), 0.002);
+        assert_eq!(out.thrust_n, o.command.thrust_n);
     }
 }

@@ -66,6 +66,7 @@ pub(crate) const UP_CONTROL: u32 = 0x40;
 pub(crate) const UP_DATA: u32 = 0x1000;
 pub(crate) const UP_CMD_BEGIN: u8 = 1;
 pub(crate) const UP_CMD_COMMIT: u8 = 2;
+pub(crate) const UP_IDLE: u8 = 0;
 pub(crate) const UP_PENDING: u8 = 2;
 pub(crate) const UP_SWAPPING: u8 = 3;
 pub(crate) const UP_ACTIVE: u8 = 4;
@@ -73,6 +74,9 @@ pub(crate) const UP_REJECTED: u8 = 5;
 /// `HF_ERR_BLOB_TRUNCATED`, `HF_ERR_BLOB_CRC`, `HF_ERR_BLOB_MASS`.
 pub(crate) const ERR_BLOB_TRUNCATED: u8 = 16;
 pub(crate) const ERR_BLOB_CRC: u8 = 20;
+/// The shim's refusals of a BEGIN while an uploaded blob flies (HF_UP_ERR_BUSY_*).
+pub(crate) const UP_ERR_BUSY_FLYING: u8 = 64;
+pub(crate) const UP_ERR_BUSY_REVERTING: u8 = 65;
 pub(crate) const ERR_BLOB_MASS: u8 = 24;
 /// The shim's fault bit of the `faults` log while the app task swaps the model.
 pub(crate) const SWAPPING: u32 = 1 << 17;

@@ -1,4 +1,4 @@
-//! The weight upload over the app's memory: registration, staging, swap, rejection.
+//! The weight upload over the app's memory: registration, the slot, swap, rejection, busy.
 
 use super::*;
 
@@ -45,7 +45,7 @@ fn the_app_memory_is_registered_once_with_its_info_block() {
     );
     assert_eq!(size, UP_DATA + hamflight::blob::MAX_LEN as u32);
     let info = shim.up_info();
-    assert_eq!((info.magic, info.layout), (u32::from_le_bytes(*b"HFUP"), 1));
+    assert_eq!((info.magic, info.layout), (u32::from_le_bytes(*b"HFUP"), 2));
     assert_eq!(info.source, 0, "compiled-in at boot");
     assert_eq!(info.crc, hamflight_bitcraze::model::MODEL_CRC);
     assert_eq!(info.mass_kg, MODEL.weights.mass_kg);
@@ -90,7 +90,7 @@ fn an_out_of_order_repeated_upload_swaps_in_on_the_ground_and_reverts() {
     order.extend(all.iter().copied().step_by(2).rev());
     order.extend_from_slice(&all[3..9]);
     assert!(shim.upload(&blob, &order));
-    // Read back before it flies (the tool's verification): the staging slot holds the blob.
+    // Read back before it flies (the tool's verification): the slot holds the blob.
     assert_eq!(shim.mem_read_all(UP_DATA, blob.len()), blob);
     let info = shim.up_info();
     assert_eq!((info.state, info.staged_crc), (UP_PENDING, blob_crc(&blob)));
@@ -104,6 +104,11 @@ fn an_out_of_order_repeated_upload_swaps_in_on_the_ground_and_reverts() {
     assert_eq!(info.version, hamflight::blob::FORMAT_VERSION);
     assert_eq!(info.name, "uploaded");
     assert_eq!(shim.log_u32("blobCrc"), blob_crc(&blob));
+    // The slot now holds the decoded model, not the blob: data reads are refused.
+    assert!(
+        shim.mem_read(UP_DATA, 24).is_none(),
+        "no data reads after the swap"
+    );
     let text = shim.debug_text();
     let crc = format!("{:08X}", blob_crc(&blob));
     assert!(text.contains(&format!("checked, crc {crc}")), "{text}");
@@ -153,6 +158,13 @@ fn an_out_of_order_repeated_upload_swaps_in_on_the_ground_and_reverts() {
     )));
 }
 
+/// BEGIN of `len` bytes (false: refused).
+fn begin(shim: &mut Shim, len: usize) -> bool {
+    let mut begin = vec![UP_CMD_BEGIN];
+    begin.extend_from_slice(&(len as u32).to_le_bytes());
+    shim.mem_write(UP_CONTROL, &begin)
+}
+
 #[test]
 fn torn_and_bad_uploads_are_rejected_and_the_flying_blob_is_untouched() {
     let mut shim = Shim::new();
@@ -160,14 +172,23 @@ fn torn_and_bad_uploads_are_rejected_and_the_flying_blob_is_untouched() {
     assert!(shim.upload(&good, &chunks(&good)));
     shim.wait_for_swap();
     assert_eq!(shim.log_u8("blobSrc"), 1);
+    assert_eq!(shim.log_u32("blobCrc"), blob_crc(&good));
+    // The uploaded blob flies from the slot: on the ground a BEGIN is refused and hands the
+    // controller back to the compiled-in blob; then one is accepted.
+    assert!(!begin(&mut shim, good.len()), "busy while the upload flies");
+    assert_eq!(shim.up_info().error, UP_ERR_BUSY_REVERTING);
+    shim.wait_for_swap();
+    assert_eq!(
+        (shim.log_u8("blobSrc"), shim.up_info().state),
+        (0, UP_IDLE),
+        "the compiled-in blob flies again"
+    );
     let flying = shim.log_u32("blobCrc");
-    assert_eq!(flying, blob_crc(&good));
+    assert_eq!(flying, hamflight_bitcraze::model::MODEL_CRC);
 
     let (_, next) = other_blob(0.033);
     let reject = |shim: &mut Shim, bytes: &[u8], len: usize, order: &[usize], err: u8| {
-        let mut begin = vec![UP_CMD_BEGIN];
-        begin.extend_from_slice(&(len as u32).to_le_bytes());
-        assert!(shim.mem_write(UP_CONTROL, &begin));
+        assert!(begin(shim, len));
         for &off in order {
             let end = (off + CFLIB_CHUNK).min(bytes.len()).min(len);
             assert!(shim.mem_write(UP_DATA + off as u32, &bytes[off..end]));
@@ -175,12 +196,18 @@ fn torn_and_bad_uploads_are_rejected_and_the_flying_blob_is_untouched() {
         assert!(shim.mem_write(UP_CONTROL, &[UP_CMD_COMMIT]));
         let info = shim.up_info();
         assert_eq!((info.state, info.error), (UP_REJECTED, err), "{info:?}");
+        // Rejected at the commit: the bytes stay readable.
+        let n = len.min(24);
+        assert_eq!(
+            shim.mem_read(UP_DATA, n as u8).as_deref(),
+            Some(&bytes[..n])
+        );
         // Nothing to swap: ticks fly on with the blob that flew before.
         shim.tick();
         shim.tick();
         assert_eq!(
             (shim.log_u8("blobSrc"), shim.log_u32("blobCrc")),
-            (1, flying)
+            (0, flying)
         );
         assert_eq!(shim.up_info().crc, flying);
     };
@@ -216,9 +243,7 @@ fn torn_and_bad_uploads_are_rejected_and_the_flying_blob_is_untouched() {
         ERR_BLOB_MASS,
     );
     // A write past the announced length is refused.
-    let mut begin = vec![UP_CMD_BEGIN];
-    begin.extend_from_slice(&(next.len() as u32).to_le_bytes());
-    assert!(shim.mem_write(UP_CONTROL, &begin));
+    assert!(begin(&mut shim, next.len()));
     assert!(!shim.mem_write(UP_DATA + next.len() as u32 - 2, &[0; 4]));
     // And a good upload still goes through after all that.
     assert!(shim.upload(&next, &chunks(&next)));
@@ -333,4 +358,54 @@ fn a_flight_with_the_uploaded_blob_matches_the_native_controller_with_it() {
     };
     let d = c_path_matches_native_with(0, gains, &m, Some(&blob));
     println!("uploaded blob, paper-spiral: largest difference from native {d:.3e} m");
+}
+
+#[test]
+fn an_upload_while_an_uploaded_blob_flies_waits_for_the_landing() {
+    // The uploaded blob flies from the one slot: a new upload in flight is refused (the client
+    // waits), and goes through once landed.
+    let mut shim = Shim::new();
+    let (_, first) = other_blob(0.029);
+    assert!(shim.upload(&first, &chunks(&first)));
+    shim.wait_for_swap();
+    assert_eq!(shim.log_u8("blobSrc"), 1);
+    let mut plant = scenario("hover").plant();
+    let start = plant.state().p_m.cast::<f32>();
+    shim.supervisor(true, true);
+    shim.set_param_f32("airHeight", 0.0);
+    let hold = move |shim: &mut Shim, _t: f64| {
+        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
+    };
+    fly_shim(&mut shim, &mut plant, 0.5, hold);
+    assert_eq!(shim.log_u8("phase"), 2, "airborne");
+    let (_, next) = other_blob(0.031);
+    assert!(!begin(&mut shim, next.len()), "refused in flight");
+    let info = shim.up_info();
+    assert_eq!((info.state, info.error), (UP_ACTIVE, UP_ERR_BUSY_FLYING));
+    // 0.2 s more in the air: the uploaded blob flies on, no revert, still refused.
+    fly_shim(&mut shim, &mut plant, 0.2, hold);
+    assert!(!begin(&mut shim, next.len()));
+    assert_eq!(
+        (shim.log_u8("blobSrc"), shim.log_u32("blobCrc")),
+        (1, blob_crc(&first))
+    );
+    assert!(
+        (plant.state().p_m.cast::<f32>() - start).norm() < 0.02,
+        "held the hover"
+    );
+    // Landed: a BEGIN hands back to the compiled-in blob, the retry is accepted.
+    shim.supervisor(true, false);
+    shim.tick();
+    shim.tick();
+    assert_eq!(shim.log_u8("phase"), 1, "landed");
+    assert!(!begin(&mut shim, next.len()));
+    assert_eq!(shim.up_info().error, UP_ERR_BUSY_REVERTING);
+    shim.wait_for_swap();
+    assert_eq!(shim.log_u8("blobSrc"), 0);
+    assert!(shim.upload(&next, &chunks(&next)));
+    shim.wait_for_swap();
+    assert_eq!(
+        (shim.log_u8("blobSrc"), shim.log_u32("blobCrc")),
+        (1, blob_crc(&next))
+    );
 }

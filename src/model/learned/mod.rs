@@ -53,7 +53,11 @@ pub const CONTROL_SCALE: [f32; 4] = [
 
 /// The learned Hamiltonian model: the networks θ (J⁻¹, g) and φ (W) of a weight blob, and the
 /// vehicle's motor lag the blob carries.
+///
+/// `repr(C)` with the weights first: [`ModelWeights`]'s memory (the mass, then the parameters in
+/// blob order) starts at offset 0, which in-place decoding relies on.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct LearnedModel {
     /// The learned parameters.
     pub weights: ModelWeights,
@@ -66,6 +70,8 @@ pub struct LearnedModel {
     /// rigid body alone, [`PortTerms::IDENTITY`]).
     port: PortTerms,
 }
+
+const _: () = assert!(core::mem::offset_of!(LearnedModel, weights) == 0);
 
 impl LearnedModel {
     /// Wraps trained weights, with the default motor lag ([`DEFAULT_MOTOR_TAU_S`]).
@@ -95,13 +101,13 @@ impl LearnedModel {
         Self { port, ..self }
     }
 
-    /// [`LearnedModel::with_port`] in place.
-    pub(crate) fn set_port(&mut self, port: PortTerms) {
+    /// [`LearnedModel::with_port`] in place (no 10 KB copy on the stack: for in-place decoding).
+    pub fn set_port(&mut self, port: PortTerms) {
         self.port = port;
     }
 
-    /// [`LearnedModel::with_motor_tau_s`] in place.
-    pub(crate) fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
+    /// [`LearnedModel::with_motor_tau_s`] in place (no 10 KB copy on the stack).
+    pub fn set_motor_tau_s(&mut self, motor_tau_s: f32) {
         self.motor_tau_bits = motor_tau_s.to_bits() ^ DEFAULT_MOTOR_TAU_S.to_bits();
     }
 
