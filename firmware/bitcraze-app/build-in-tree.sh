@@ -180,9 +180,13 @@ for p in "${platforms[@]}"; do
     # for its own frames (the stock Lee controller reaches about 1,000 B).
     # controllerOutOfTreeInit first runs in the system task (1,200 B in all). appMain builds the
     # controller, runs the boot self test and the model swaps.
+    # Every task keeps 15 % of its stack after a context switch at the deepest point (204 B: the
+    # FPU exception frame and FreeRTOS's saved registers): the app task's budget follows from
+    # its words; the memory task (1,200 B, 48 B of its own frames above the handler) runs the
+    # upload's handler, COMMIT's blob check included.
     python3 "$here/stack-estimate.py" "$here/build/$p.elf" controllerOutOfTree=1200 \
         controllerOutOfTreeInit=600 \
-        "appMain=$((app_words * 4 - 104 - 200))"
+        "appMain=$((app_words * 4 * 85 / 100 - 204))" upMemWrite=768 upMemRead=768
     summary+=("$p  build/$p.bin" "$(printf '%s\n' "$sizes" | sed 's/^/    /')")
 done
 

@@ -104,16 +104,21 @@ if command -v arm-none-eabi-gcc >/dev/null 2>&1; then
     arm-none-eabi-gcc -Os -std=gnu11 -mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16 \
         -ffunction-sections -fdata-sections -Wall -Werror \
         -I"$here/host-include" -I"$here/include" -c "$here/hamflight_oot.c" -o "$shim"
-    # Each entry point the firmware calls, with the task it runs in and that task's budget:
-    # the stabilizer task's step; the first init, in the system task (300 words in all, so half
-    # for Bitcraze's frames above it and its printf); the app task (app-config's words, less an
-    # FPU exception frame and 200 B).
+    # Each entry point the firmware calls, with the task it runs in and that task's budget
+    # (every task keeps 15 % of its stack unused after its frames above ours and 204 B for a
+    # context switch at the deepest point: the FPU exception frame, 104 B, and FreeRTOS's saved
+    # r4-r11, lr and s16-s31, 100 B): the stabilizer task's step (1,800 B); the first init, in
+    # the system task (300 words in all, so half for Bitcraze's frames above it and its printf);
+    # the app task (app-config's words); the upload's memory handler, in the memory task (1,200 B,
+    # 48 B of its own frames above the handler).
     app_words=$(sed -n 's/^CONFIG_APP_STACKSIZE=//p' "$here/app-config")
     for entry in "controllerOutOfTree=$OOT_STACK_BUDGET" "controllerOutOfTreeInit=600" \
-        "appMain=$((app_words * 4 - 104 - 200))"; do
+        "appMain=$((app_words * 4 * 85 / 100 - 204))" "upMemWrite=768" "upMemRead=768"; do
         fn=${entry%%=*}
+        # The memory handlers are static: linked from the function that registers them.
+        case $fn in upMem*) root=controllerOutOfTreeInit ;; *) root=$fn ;; esac
         entry_elf=$out_dir/${fn}_stack.elf
-        arm-none-eabi-ld --gc-sections -e "$fn" -u "$fn" --unresolved-symbols=ignore-all \
+        arm-none-eabi-ld --gc-sections -e "$root" -u "$root" --unresolved-symbols=ignore-all \
             -o "$entry_elf" "$shim" "$obj"
         python3 "$here/stack-estimate.py" "$entry_elf" "$entry" \
             || fail "$fn's stack is over its budget (${entry#*=} B)"

@@ -92,6 +92,7 @@
 #include "param.h"
 #include "stabilizer_types.h"
 #include "stm32f4xx.h"
+#include "static_mem.h"
 #include "supervisor.h"
 #include "task.h"
 
@@ -145,8 +146,10 @@ enum { HF_PHASE_OFF = 0, HF_PHASE_GROUND = 1, HF_PHASE_AIRBORNE = 2 };
 
 static hf_controller_t ctl;
 static bool isInit;
-static hf_state_t hfState;
-static hf_setpoint_t hfSetpoint;
+/* The step's inputs and the parameters' gains live in the core-coupled memory (CPU only, no DMA
+ * touches them): their 184 B of RAM go to the app task's stack (app-config). */
+NO_DMA_CCM_SAFE_ZERO_INIT static hf_state_t hfState;
+NO_DMA_CCM_SAFE_ZERO_INIT static hf_setpoint_t hfSetpoint;
 static hf_output_t hfOut;
 
 /* Flight phase. */
@@ -159,7 +162,7 @@ static float refP[3];
 static float refYaw;
 
 /* Parameters. */
-static hf_gains_t gains;
+NO_DMA_CCM_SAFE_ZERO_INIT static hf_gains_t gains;
 static uint8_t adaptOn = 1;
 static uint8_t resetRequest;
 static float airborneHeightM = 0.05f;
