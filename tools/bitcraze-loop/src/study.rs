@@ -336,6 +336,63 @@ fn table(
     Ok(())
 }
 
+/// One flight's scores in `--scores`' file.
+#[derive(serde::Serialize)]
+struct Scores<'a> {
+    scenario: &'a str,
+    controller: &'a str,
+    /// Position RMSE over t ≥ 5 s (m).
+    rmse_pos_window_m: Option<f64>,
+    max_err_m: f64,
+    crash_time_s: Option<f64>,
+    /// Largest roll/pitch standard deviation over t ≥ 5 s (deg).
+    att_std_deg: Option<f64>,
+    /// Fraction of control ticks whose power distribution capped.
+    saturated_fraction: f64,
+    /// Mean estimate − truth over t ≥ 5 s (m, world).
+    est_pos_bias_m: Option<[f64; 3]>,
+    /// Mean truth − reference over t ≥ 5 s (m, world).
+    pos_err_mean_m: Option<[f64; 3]>,
+    estimator_out_of_bounds: u64,
+}
+
+/// `--scores`: every flight's scores, without wall-clock times.
+fn scores_json(
+    args: &Args,
+    commit: &str,
+    platform: &ffi::Platform,
+    scenarios: &[Scenario],
+    flights: &[Flight],
+) -> serde_json::Value {
+    let rows: Vec<Scores> = flights
+        .iter()
+        .map(|f| {
+            let r = &f.report;
+            Scores {
+                scenario: &r.scenario,
+                controller: &r.controller,
+                rmse_pos_window_m: r.rmse_pos_window_m,
+                max_err_m: r.max_err_m,
+                crash_time_s: r.crash_time_s,
+                att_std_deg: r.att_std_deg,
+                saturated_fraction: r.saturated_fraction,
+                est_pos_bias_m: r.est_pos_bias_m,
+                pos_err_mean_m: r.pos_err_mean_m,
+                estimator_out_of_bounds: f.estimator_out_of_bounds,
+            }
+        })
+        .collect();
+    serde_json::json!({
+        "tool": "tools/bitcraze-loop (regenerate: tools/bitcraze-loop/doc-data.sh)",
+        "crazyflie_firmware_commit": commit,
+        "platform": platform,
+        "state": args.state,
+        "controllers": args.controllers,
+        "scenarios": scenarios.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(),
+        "flights": rows,
+    })
+}
+
 /// Flies every scenario with every controller and prints (and writes) the tables.
 pub fn run(args: &Args) -> Result<()> {
     let platform = ffi::platform();
@@ -406,6 +463,13 @@ pub fn run(args: &Args) -> Result<()> {
             host_train::io::write_json_atomic(&file, &f.log)?;
         }
         eprintln!("wrote {}/report.json, table.md and logs/", dir.display());
+    }
+    if let Some(path) = &args.scores {
+        let json = scores_json(args, commit, &platform, &scenarios, &flights);
+        let mut text = serde_json::to_string_pretty(&json)?;
+        text.push('\n');
+        host_train::io::write_atomic(path, text.as_bytes())?;
+        eprintln!("wrote {}", path.display());
     }
     Ok(())
 }
