@@ -36,6 +36,7 @@ pub use crate::io::files::{write_atomic, write_json_atomic};
 pub use crate::io::flightlog::FlightLog;
 use crate::sim::plant::{Plant, PlantState};
 use crate::sim::scenario::Scenario;
+use crate::sim::trajectory::TrajectoryPoint;
 
 /// Position error (m) above which a flight counts as crashed.
 pub const CRASH_ERR_M: f64 = 1.0;
@@ -99,11 +100,11 @@ impl StateLog {
 /// [`fly`], also recording the flight's states ([`StateLog`]); the [`FlightLog`] is the same.
 pub fn fly_with_states(scenario: &Scenario, ctrl: &mut dyn Controller) -> (FlightLog, StateLog) {
     let mut states = StateLog::default();
-    let log = fly_loop(scenario, ctrl, None, |_, _, _| {}, Some(&mut states));
+    let log = fly_controller(scenario, ctrl, None, |_, _, _| {}, Some(&mut states));
     (log, states)
 }
 
-/// The one SITL flight loop ([`fly`], [`fly_with_progress`], and `track`'s
+/// The one SITL flight loop with a controller ([`fly`], [`fly_with_progress`], and `track`'s
 /// [`super::track::track_disturbance`]): resets `ctrl`, then at every control tick measures (the
 /// scenario's sensor chain, else its state and accelerometer noise on their own streams), steps
 /// `ctrl` and the physics; stops early on a crash. After each control step, before the physics
@@ -114,114 +115,335 @@ pub fn fly_observed<C: Controller + ?Sized>(
     progress: Option<&indicatif::ProgressBar>,
     on_tick: impl FnMut(f64, &C, &Plant),
 ) -> FlightLog {
-    fly_loop(scenario, ctrl, progress, on_tick, None)
+    fly_controller(scenario, ctrl, progress, on_tick, None)
+}
+
+/// What a [`Stage`] does until its next tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Actuation {
+    /// Rotor speeds (rpm) the plant is driven with until the next tick.
+    pub rpm: [f64; 4],
+    /// Whether a rotor command sat at a limit (logged at control ticks).
+    pub saturated: bool,
+    /// The position the controller was given (m, world; logged at control ticks), if any.
+    pub est_p_m: Option<[f64; 3]>,
+}
+
+/// Sensing, control and actuation from outside host-train, flown by the one loop
+/// ([`fly_stage`]) in place of the scenario's sensors, a [`Controller`] and the rotor clamp:
+/// at each of its ticks it reads the plant (its sensors' truth, e.g. the IMU's), estimates,
+/// controls and says which rotor speeds to hold until its next tick. The plant and its
+/// disturbances and faults, the log, crash detection and the scores stay the loop's.
+/// (`tools/bitcraze-loop`: Bitcraze's filters, Kalman estimator, controllers and power
+/// distribution at the stabilizer's 1 kHz.)
+pub trait Stage {
+    /// The controller's name, for the log.
+    fn name(&self) -> &str;
+
+    /// The stage's tick (Hz): a multiple of the scenario's control rate and a divisor of its
+    /// physics rate (control rate × physics steps per control tick).
+    fn tick_hz(&self) -> f64;
+
+    /// The adaptation estimate logged at control ticks, if the controller adapts.
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        None
+    }
+
+    /// Tick number `tick` (time `t_s` = tick / [`Stage::tick_hz`], which the plant is at) with
+    /// the `reference` at that time; `control` is true on control ticks (every
+    /// tick_hz / control_hz ticks from 0), which the loop logs. Not called on the last tick (the
+    /// end's or a crash's).
+    fn step(
+        &mut self,
+        tick: u64,
+        t_s: f64,
+        plant: &Plant,
+        reference: &TrajectoryPoint,
+        control: bool,
+    ) -> Actuation;
+
+    /// After each physics step (sensors sampled at the physics rate). Nothing by default.
+    fn sampled(&mut self, plant: &Plant) {
+        let _ = plant;
+    }
+
+    /// At the last tick (the end's or a crash's), which no step follows. Nothing by default.
+    fn ended(&mut self, plant: &Plant) {
+        let _ = plant;
+    }
+}
+
+/// Fly `scenario` with an outside [`Stage`] in the one loop, at the stage's tick; stops early on
+/// a crash (checked at every tick). Ticks count from 0 at t = 0, t = tick / tick_hz; the log has
+/// the control ticks. Fails if the stage's tick does not divide the physics rate or is not a
+/// multiple of the control rate.
+pub fn fly_stage(scenario: &Scenario, stage: &mut dyn Stage) -> Result<FlightLog> {
+    let clock = Clock::stage(scenario, stage.tick_hz())?;
+    Ok(fly_loop(scenario, &clock, scenario.plant(), stage, None))
+}
+
+/// The loop's ticks: at the control rate (a controller), or at a [`Stage`]'s faster one.
+struct Clock {
+    /// The last tick (t = the scenario's duration).
+    n_ticks: u64,
+    /// Ticks per control tick.
+    control_every: u64,
+    /// Physics steps per tick, each `dt_phys` long.
+    nsub: usize,
+    dt_phys: f64,
+    physics_hz: f64,
+    /// Ticks per progress-bar second.
+    ticks_per_s: u64,
+    time: TickTime,
+}
+
+/// How a tick's number becomes its time.
+enum TickTime {
+    /// t = tick · dt.
+    Times(f64),
+    /// t = tick / hz.
+    Over(f64),
+}
+
+impl Clock {
+    /// One tick per control tick (t = k · dt), the scenario's physics steps in between.
+    fn control(scenario: &Scenario) -> Self {
+        let dt = scenario.control_dt_s();
+        let nsub = scenario.physics_substeps();
+        let dt_phys = dt / nsub as f64;
+        Self {
+            n_ticks: (scenario.spec.duration_s / dt).round() as u64,
+            control_every: 1,
+            nsub,
+            dt_phys,
+            physics_hz: 1.0 / dt_phys,
+            ticks_per_s: (1.0 / dt).round().max(1.0) as u64,
+            time: TickTime::Times(dt),
+        }
+    }
+
+    /// Ticks at `hz` (t = tick / hz), a multiple of the control rate dividing the physics rate.
+    fn stage(scenario: &Scenario, hz: f64) -> Result<Self> {
+        let control_hz = scenario.spec.control_hz;
+        let physics_hz = control_hz * scenario.physics_substeps() as f64;
+        let nsub = (physics_hz / hz).round() as usize;
+        if nsub == 0 || (nsub as f64 * hz - physics_hz).abs() > 1e-6 {
+            anyhow::bail!(
+                "{}: physics at {physics_hz} Hz is not a multiple of the stage's {hz} Hz tick",
+                scenario.name
+            );
+        }
+        let control_every = (hz / control_hz).round() as u64;
+        if control_every == 0 || (control_every as f64 * control_hz - hz).abs() > 1e-6 {
+            anyhow::bail!(
+                "{}: control at {control_hz} Hz does not divide the stage's {hz} Hz tick",
+                scenario.name
+            );
+        }
+        Ok(Self {
+            n_ticks: (scenario.spec.duration_s * hz).round() as u64,
+            control_every,
+            nsub,
+            dt_phys: 1.0 / physics_hz,
+            physics_hz,
+            ticks_per_s: hz.round().max(1.0) as u64,
+            time: TickTime::Over(hz),
+        })
+    }
+
+    fn t(&self, tick: u64) -> f64 {
+        match self.time {
+            TickTime::Times(dt) => tick as f64 * dt,
+            TickTime::Over(hz) => tick as f64 / hz,
+        }
+    }
+}
+
+/// A [`Controller`] behind the scenario's sensors as a [`Stage`]: the sensor chain (sampled at
+/// every physics step) when the scenario has one, else its state and accelerometer noise on
+/// their own streams; the rotor clamp; `on_tick` and the [`StateLog`] when given.
+struct Sensed<'a, C: ?Sized, F> {
+    ctrl: &'a mut C,
+    on_tick: F,
+    states: Option<&'a mut StateLog>,
+    chain: Option<crate::sim::sensors::SensorChain>,
+    rng: ChaCha8Rng,
+    rng_acc: ChaCha8Rng,
+    dt: f64,
+    max_rpm: f64,
+    control_wall_s: f64,
+}
+
+impl<C: Controller + ?Sized, F: FnMut(f64, &C, &Plant)> Stage for Sensed<'_, C, F> {
+    fn name(&self) -> &str {
+        self.ctrl.name()
+    }
+
+    fn tick_hz(&self) -> f64 {
+        1.0 / self.dt
+    }
+
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        self.ctrl.adaptation_estimate()
+    }
+
+    fn step(
+        &mut self,
+        _tick: u64,
+        t: f64,
+        plant: &Plant,
+        r: &TrajectoryPoint,
+        _control: bool,
+    ) -> Actuation {
+        let (meas, acc, est_p_m) = match self.chain.as_ref().and_then(|c| c.view()) {
+            Some(view) => (view.state, view.acc_body_m_s2, Some(view.state.p_m.into())),
+            None => (
+                plant.measure(&mut self.rng),
+                plant.measure_accelerometer(&mut self.rng_acc),
+                None,
+            ),
+        };
+        if let Some(s) = self.states.as_deref_mut() {
+            s.push_truth(plant.state());
+            s.push_estimate(&meas);
+        }
+        let c0 = Instant::now();
+        let cmd = self.ctrl.step_measured(t, &meas, Some(&acc), r, self.dt);
+        self.control_wall_s += c0.elapsed().as_secs_f64();
+        let saturated = cmd
+            .iter()
+            .any(|&c| !(c > 0.0 && c < self.max_rpm * (1.0 - 1e-9)));
+        let rpm = plant.params.clamp_rpm(cmd);
+        (self.on_tick)(t, &*self.ctrl, plant);
+        Actuation {
+            rpm,
+            saturated,
+            est_p_m,
+        }
+    }
+
+    fn sampled(&mut self, plant: &Plant) {
+        if let Some(c) = self.chain.as_mut() {
+            c.sample(plant);
+        }
+    }
+
+    fn ended(&mut self, plant: &Plant) {
+        if let Some(s) = self.states.as_deref_mut() {
+            // What the controller would be given; the noise streams are not used again.
+            let est = match self.chain.as_ref().and_then(|c| c.view()) {
+                Some(view) => view.state,
+                None => plant.measure(&mut self.rng),
+            };
+            s.push_truth(plant.state());
+            s.push_estimate(&est);
+        }
+    }
 }
 
 /// [`fly_observed`], recording into `states` when given (which changes nothing else).
-fn fly_loop<C: Controller + ?Sized>(
+fn fly_controller<C: Controller + ?Sized>(
     scenario: &Scenario,
     ctrl: &mut C,
     progress: Option<&indicatif::ProgressBar>,
-    mut on_tick: impl FnMut(f64, &C, &Plant),
-    mut states: Option<&mut StateLog>,
+    on_tick: impl FnMut(f64, &C, &Plant),
+    states: Option<&mut StateLog>,
 ) -> FlightLog {
-    let wall0 = Instant::now();
     ctrl.reset();
-    let mut plant = scenario.plant();
-    let mut rng = ChaCha8Rng::seed_from_u64(scenario.spec.seed);
-    // The accelerometer's noise has its own stream, so the state noise is the same with or
-    // without it.
-    let mut rng_acc = ChaCha8Rng::seed_from_u64(scenario.spec.seed ^ ACC_NOISE_STREAM);
-    let dt = scenario.control_dt_s();
-    let nsub = scenario.physics_substeps();
-    let dt_phys = dt / nsub as f64;
-    let n_ticks = (scenario.spec.duration_s / dt).round() as u64;
-    let mut log = FlightLog {
-        scenario: scenario.name.clone(),
-        controller: ctrl.name().to_string(),
-        planned_duration_s: scenario.spec.duration_s,
-        control_hz: scenario.spec.control_hz,
-        physics_hz: 1.0 / dt_phys,
-        ..Default::default()
-    };
-    let ticks_per_s = (1.0 / dt).round().max(1.0) as u64;
-    let mut last_cmd = [0.0; 4];
-    let max_rpm = plant.params.max_rpm();
+    let clock = Clock::control(scenario);
+    let plant = scenario.plant();
     // The Crazyflie's sensor chain and estimator, sampled at every physics step.
     let mut chain = scenario
         .spec
         .sensors
         .as_ref()
-        .map(|s| crate::sim::sensors::SensorChain::new(s, plant.state(), 1.0 / dt_phys));
+        .map(|s| crate::sim::sensors::SensorChain::new(s, plant.state(), 1.0 / clock.dt_phys));
     if let Some(c) = chain.as_mut() {
         c.sample(&plant);
     }
-    for k in 0..=n_ticks {
-        let t = k as f64 * dt;
+    let mut stage = Sensed {
+        max_rpm: plant.params.max_rpm(),
+        ctrl,
+        on_tick,
+        states,
+        chain,
+        rng: ChaCha8Rng::seed_from_u64(scenario.spec.seed),
+        // The accelerometer's noise has its own stream, so the state noise is the same with or
+        // without it.
+        rng_acc: ChaCha8Rng::seed_from_u64(scenario.spec.seed ^ ACC_NOISE_STREAM),
+        dt: scenario.control_dt_s(),
+        control_wall_s: 0.0,
+    };
+    let mut log = fly_loop(scenario, &clock, plant, &mut stage, progress);
+    log.control_wall_s = stage.control_wall_s;
+    log
+}
+
+/// The one SITL flight loop: at every tick of `clock` sets the plant's time, logs (on control
+/// ticks), checks for a crash, lets `stage` sense, control and actuate, and steps the physics;
+/// stops early on a crash.
+fn fly_loop<S: Stage + ?Sized>(
+    scenario: &Scenario,
+    clock: &Clock,
+    mut plant: Plant,
+    stage: &mut S,
+    progress: Option<&indicatif::ProgressBar>,
+) -> FlightLog {
+    let wall0 = Instant::now();
+    let mut log = FlightLog {
+        scenario: scenario.name.clone(),
+        controller: stage.name().to_string(),
+        planned_duration_s: scenario.spec.duration_s,
+        control_hz: scenario.spec.control_hz,
+        physics_hz: clock.physics_hz,
+        ..Default::default()
+    };
+    let mut last_rpm = [0.0; 4];
+    for k in 0..=clock.n_ticks {
+        let t = clock.t(k);
         plant.set_t_s(t);
         let truth = *plant.state();
         let r = scenario.reference(t);
         let err = (truth.p_m - r.p_m).norm();
-        log.t_s.push(t);
-        log.p_m.push(truth.p_m.into());
-        log.p_ref_m.push(r.p_m.into());
-        log.err_m
-            .push(if err.is_finite() { err } else { f64::INFINITY });
-        log.adaptation
-            .push(ctrl.adaptation_estimate().unwrap_or_default());
-        log.rpy_rad.push(truth.rpy().into());
-        if let Some(s) = states.as_deref_mut() {
-            s.push_truth(&truth);
+        let control = k % clock.control_every == 0;
+        if control {
+            log.t_s.push(t);
+            log.p_m.push(truth.p_m.into());
+            log.p_ref_m.push(r.p_m.into());
+            log.err_m
+                .push(if err.is_finite() { err } else { f64::INFINITY });
+            log.adaptation
+                .push(stage.adaptation_estimate().unwrap_or_default());
+            log.rpy_rad.push(truth.rpy().into());
         }
         let err_ok = err.is_finite() && err <= CRASH_ERR_M;
         let crashed = !truth.is_finite() || !err_ok || truth.p_m.z < 0.0;
-        if crashed || k == n_ticks {
-            if let Some(s) = states.as_deref_mut() {
-                // What the controller would be given; the noise streams are not used again.
-                let est = match chain.as_ref().and_then(|c| c.view()) {
-                    Some(view) => view.state,
-                    None => plant.measure(&mut rng),
-                };
-                s.push_estimate(&est);
+        if crashed || k == clock.n_ticks {
+            stage.ended(&plant);
+            if control {
+                log.rpm.push(last_rpm);
             }
-            log.rpm.push(last_cmd);
             if crashed {
                 log.crash_time_s = Some(t);
             }
             break;
         }
-        let (meas, acc) = match chain.as_ref().and_then(|c| c.view()) {
-            Some(view) => {
-                log.est_p_m.push(view.state.p_m.into());
-                (view.state, view.acc_body_m_s2)
+        let act = stage.step(k, t, &plant, &r, control);
+        last_rpm = act.rpm;
+        if control {
+            log.rpm.push(act.rpm);
+            log.saturated.push(act.saturated);
+            if let Some(p) = act.est_p_m {
+                log.est_p_m.push(p);
             }
-            None => (
-                plant.measure(&mut rng),
-                plant.measure_accelerometer(&mut rng_acc),
-            ),
-        };
-        if let Some(s) = states.as_deref_mut() {
-            s.push_estimate(&meas);
+            log.control_steps += 1;
         }
-        let c0 = Instant::now();
-        let cmd = ctrl.step_measured(t, &meas, Some(&acc), &r, dt);
-        log.control_wall_s += c0.elapsed().as_secs_f64();
-        log.control_steps += 1;
-        log.saturated.push(
-            cmd.iter()
-                .any(|&c| !(c > 0.0 && c < max_rpm * (1.0 - 1e-9))),
-        );
-        last_cmd = plant.params.clamp_rpm(cmd);
-        log.rpm.push(last_cmd);
-        on_tick(t, ctrl, &plant);
-        for _ in 0..nsub {
-            plant.step(last_cmd, dt_phys);
-            if let Some(c) = chain.as_mut() {
-                c.sample(&plant);
-            }
+        for _ in 0..clock.nsub {
+            plant.step(act.rpm, clock.dt_phys);
+            stage.sampled(&plant);
         }
         if let Some(pb) = progress {
-            if k % ticks_per_s == 0 {
+            if k % clock.ticks_per_s == 0 {
                 pb.inc(1);
             }
         }

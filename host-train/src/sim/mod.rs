@@ -3,8 +3,8 @@
 //! Front door: code outside `host-train/src` imports these from here, never from a submodule
 //! (`tools/front-door.py` checks it): [`Plant`], [`PlantState`], [`VehicleParams`],
 //! [`Disturbance`], [`Effects`], [`StateNoise`], [`gaussian`], [`rot_from_rpy`], [`so3_exp`]
-//! (the plant); [`Scenario`], [`ScenarioSpec`]; [`TrajectoryPoint`]; [`VehicleFile`],
-//! [`RPM_PER_RAD_S`] (vehicle descriptions).
+//! (the plant); [`Scenario`], [`ScenarioSpec`]; [`SensorSpec`] (a scenario's `[sensors]`);
+//! [`TrajectoryPoint`]; [`VehicleFile`], [`RPM_PER_RAD_S`] (vehicle descriptions).
 
 pub mod ekf;
 pub mod plant;
@@ -19,5 +19,6 @@ pub use plant::{
     VehicleParams,
 };
 pub use scenario::{Scenario, ScenarioSpec};
+pub use sensors::SensorSpec;
 pub use trajectory::TrajectoryPoint;
 pub use vehicle::{VehicleFile, RPM_PER_RAD_S};

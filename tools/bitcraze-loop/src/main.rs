@@ -73,10 +73,17 @@ pub struct Args {
     /// Write report.json (every flight's scores) and table.md here (created if missing).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Also write the flights' scores as JSON here (no wall-clock times, so the same build and
+    /// checkout always write the same file): the source of the docs' Bitcraze tables,
+    /// `docs/data/bitcraze-loop.json` (and `bitcraze-loop-truth.json` with `--state truth`),
+    /// which `tools/bitcraze-loop/doc-data.sh` regenerates.
+    #[arg(long, value_name = "FILE")]
+    pub scores: Option<PathBuf>,
 }
 
 /// Where the controllers' position, velocity and attitude come from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum StateSource {
     /// Bitcraze's Kalman estimate.
     Kalman,

@@ -1,18 +1,18 @@
-//! The study's flight loop: a 1 kHz stabilizer tick as on the Crazyflie (IMU sample, Bitcraze's
-//! filters, their estimator task's iteration, the controller, their power distribution), the
-//! SITL plant in between, and host-train's scores.
+//! The study: a 1 kHz stabilizer tick as on the Crazyflie (IMU sample, Bitcraze's filters, their
+//! estimator task's iteration, the controller, their power distribution) as a stage of
+//! host-train's one flight loop (`host_train::fly::fly_stage`: the SITL plant, its disturbances
+//! and faults, the log, crash detection), and host-train's scores.
 
 use std::collections::VecDeque;
 use std::f64::consts::FRAC_1_SQRT_2;
 use std::fmt::Write as _;
-use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use hamflight::{Measurement, Setpoint, State};
 use host_train::control::{core_by_name, CoreStep};
-use host_train::fly::{Report, CRASH_ERR_M};
+use host_train::fly::{fly_stage, Actuation, Report, Stage};
 use host_train::io::FlightLog;
-use host_train::sim::{gaussian, so3_exp, Scenario};
+use host_train::sim::{gaussian, so3_exp, Plant, Scenario, SensorSpec, TrajectoryPoint};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -88,107 +88,115 @@ fn bc_truth(s: &host_train::sim::PlantState, acc_world_g: Vector3<f64>) -> BcSta
     }
 }
 
-fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) -> Result<Flight> {
-    let wall0 = Instant::now();
-    let spec = scenario.spec.sensors.clone().unwrap_or_default();
-    let mut plant = scenario.plant();
-    let physics_hz = scenario.spec.control_hz * scenario.physics_substeps() as f64;
-    let nsub = (physics_hz / TICK_HZ).round() as usize;
-    if nsub == 0 || (nsub as f64 * TICK_HZ - physics_hz).abs() > 1e-6 {
-        bail!(
-            "{}: physics at {physics_hz} Hz is not a multiple of the {TICK_HZ} Hz stabilizer tick",
-            scenario.name
-        );
-    }
-    let ctrl_every = (TICK_HZ / scenario.spec.control_hz).round() as u64;
-    if ctrl_every == 0 || (ctrl_every as f64 * scenario.spec.control_hz - TICK_HZ).abs() > 1e-6 {
-        bail!(
-            "{}: control at {} Hz does not divide the {TICK_HZ} Hz tick",
-            scenario.name,
-            scenario.spec.control_hz
-        );
-    }
-    let pose_every = (TICK_HZ / spec.pose_hz).round().max(1.0) as u64;
-    let latency_ticks = (spec.pose_latency_s * TICK_HZ).round() as u64;
-    let dt_phys = 1.0 / physics_hz;
-    let dt_ctrl = ctrl_every as f64 / TICK_HZ;
-    let n_ticks = (scenario.spec.duration_s * TICK_HZ).round() as u64;
+/// The Crazyflie's stabilizer as a stage of host-train's one flight loop: at every 1 kHz tick
+/// the IMU (our noise model) through Bitcraze's filters into their estimator task's iteration
+/// (with the pose source), then the controller and Bitcraze's power distribution.
+struct Stabilizer<'a> {
+    name: &'a str,
+    pilot: &'a mut Pilot,
+    source: StateSource,
+    spec: SensorSpec,
+    kalman: Kalman,
+    filter: ImuFilter,
+    rng: ChaCha8Rng,
+    /// Pose measurements in flight, with the tick they arrive at.
+    poses: VecDeque<(u64, BcPose)>,
+    /// The last `delay_samples + 1` estimates and filtered IMU readings.
+    views: VecDeque<(BcState, [f32; 3], [f32; 3])>,
+    motor_n: [f32; 4],
+    capped: bool,
+    /// Ticks on which the Kalman state left its bounds.
+    out_of_bounds: u64,
+    pose_every: u64,
+    latency_ticks: u64,
+    /// The control period our controllers are given (s).
+    dt_ctrl: f64,
+    kf: f64,
+    max_rpm: f64,
+}
 
-    let s0 = *plant.state();
-    let yaw0 = s0.rpy().z;
-    let mut kalman = Kalman::new(0, f32x3(&s0.p_m), yaw0 as f32)?;
-    let mut filter = ImuFilter::new(
-        TICK_HZ as f32,
-        spec.gyro_lpf_hz as f32,
-        spec.acc_lpf_hz as f32,
-    )?;
-    let mut rng = ChaCha8Rng::seed_from_u64(spec.seed ^ scenario.spec.seed);
-    let mut poses: VecDeque<(u64, BcPose)> = VecDeque::new();
-    let mut views: VecDeque<(BcState, [f32; 3], [f32; 3])> = VecDeque::new();
-    let mut motor_n = [0.0f32; 4];
-    let mut capped = false;
-    let mut out_of_bounds = 0;
-    let kf = plant.params.kf_n_per_rpm2;
-    let max_rpm = plant.params.max_rpm();
-    let mut log = FlightLog {
-        scenario: scenario.name.clone(),
-        controller: name.to_string(),
-        planned_duration_s: scenario.spec.duration_s,
-        control_hz: scenario.spec.control_hz,
-        physics_hz,
-        ..Default::default()
-    };
-    let mut last_rpm = [0.0; 4];
-    for tick in 0..=n_ticks {
-        let t = tick as f64 / TICK_HZ;
-        plant.set_t_s(t);
+impl<'a> Stabilizer<'a> {
+    fn new(
+        scenario: &Scenario,
+        name: &'a str,
+        pilot: &'a mut Pilot,
+        source: StateSource,
+    ) -> Result<Self> {
+        let spec = scenario.spec.sensors.clone().unwrap_or_default();
+        let plant = scenario.plant();
+        let ctrl_every = (TICK_HZ / scenario.spec.control_hz).round() as u64;
+        let s0 = *plant.state();
+        let yaw0 = s0.rpy().z;
+        let kalman = Kalman::new(0, f32x3(&s0.p_m), yaw0 as f32)?;
+        let filter = ImuFilter::new(
+            TICK_HZ as f32,
+            spec.gyro_lpf_hz as f32,
+            spec.acc_lpf_hz as f32,
+        )?;
+        Ok(Self {
+            name,
+            pilot,
+            source,
+            pose_every: (TICK_HZ / spec.pose_hz).round().max(1.0) as u64,
+            latency_ticks: (spec.pose_latency_s * TICK_HZ).round() as u64,
+            rng: ChaCha8Rng::seed_from_u64(spec.seed ^ scenario.spec.seed),
+            spec,
+            kalman,
+            filter,
+            poses: VecDeque::new(),
+            views: VecDeque::new(),
+            motor_n: [0.0; 4],
+            capped: false,
+            out_of_bounds: 0,
+            dt_ctrl: ctrl_every as f64 / TICK_HZ,
+            kf: plant.params.kf_n_per_rpm2,
+            max_rpm: plant.params.max_rpm(),
+        })
+    }
+}
+
+impl Stage for Stabilizer<'_> {
+    fn name(&self) -> &str {
+        self.name
+    }
+
+    fn tick_hz(&self) -> f64 {
+        TICK_HZ
+    }
+
+    fn adaptation_estimate(&self) -> Option<Vec<f64>> {
+        match &*self.pilot {
+            Pilot::Ours(c) => c.adaptation_estimate(),
+            Pilot::Bitcraze(_) => None,
+        }
+    }
+
+    fn step(
+        &mut self,
+        tick: u64,
+        _t_s: f64,
+        plant: &Plant,
+        r: &TrajectoryPoint,
+        control: bool,
+    ) -> Actuation {
         let truth = *plant.state();
-        let r = scenario.reference(t);
-        let logged = tick % ctrl_every == 0;
-        let err = (truth.p_m - r.p_m).norm();
-        if logged {
-            log.t_s.push(t);
-            log.p_m.push(truth.p_m.into());
-            log.p_ref_m.push(r.p_m.into());
-            log.err_m
-                .push(if err.is_finite() { err } else { f64::INFINITY });
-            log.rpy_rad.push(truth.rpy().into());
-            log.adaptation.push(match pilot {
-                Pilot::Ours(c) => c.adaptation_estimate().unwrap_or_default(),
-                Pilot::Bitcraze(_) => Vec::new(),
-            });
-        }
-        let flying = truth.is_finite() && err.is_finite() && err <= CRASH_ERR_M;
-        if !flying || truth.p_m.z < 0.0 {
-            if logged {
-                log.rpm.push(last_rpm);
-            }
-            log.crash_time_s = Some(t);
-            break;
-        }
-        if tick == n_ticks {
-            if logged {
-                log.rpm.push(last_rpm);
-            }
-            break;
-        }
-
+        let spec = &self.spec;
         // The IMU (our noise model), through Bitcraze's filters, into their estimator.
         let gyro = truth.w_body_rad_s
             + Vector3::from(spec.gyro_bias_rad_s)
-            + noise3(&mut rng, spec.gyro_noise_rad_s);
+            + noise3(&mut self.rng, spec.gyro_noise_rad_s);
         let acc = plant.accelerometer()
             + Vector3::from(spec.acc_bias_m_s2)
-            + noise3(&mut rng, spec.acc_noise_m_s2);
+            + noise3(&mut self.rng, spec.acc_noise_m_s2);
         let mut acc_g = f32x3(&(acc / G_M_S2));
         let mut gyro_dps = f32x3(&gyro.map(f64::to_degrees));
-        filter.apply(&mut acc_g, &mut gyro_dps);
-        kalman.imu(&acc_g, &gyro_dps);
-        if tick % pose_every == 0 {
-            let p = truth.p_m + noise3(&mut rng, spec.pose_pos_noise_m);
-            let rot = truth.rot * so3_exp(&noise3(&mut rng, spec.pose_att_noise_rad));
-            poses.push_back((
-                tick + latency_ticks,
+        self.filter.apply(&mut acc_g, &mut gyro_dps);
+        self.kalman.imu(&acc_g, &gyro_dps);
+        if tick.is_multiple_of(self.pose_every) {
+            let p = truth.p_m + noise3(&mut self.rng, spec.pose_pos_noise_m);
+            let rot = truth.rot * so3_exp(&noise3(&mut self.rng, spec.pose_att_noise_rad));
+            self.poses.push_back((
+                tick + self.latency_ticks,
                 BcPose {
                     p_m: f32x3(&p),
                     q_xyzw: quat_of(&rot),
@@ -198,27 +206,25 @@ fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) 
                 },
             ));
         }
-        let pose = match poses.front() {
-            Some((arrive, _)) if *arrive <= tick => poses.pop_front().map(|(_, p)| p),
+        let pose = match self.poses.front() {
+            Some((arrive, _)) if *arrive <= tick => self.poses.pop_front().map(|(_, p)| p),
             _ => None,
         };
-        let (mut est, ok) = kalman.step(tick as u32, true, pose.as_ref());
+        let (mut est, ok) = self.kalman.step(tick as u32, true, pose.as_ref());
         if !ok {
-            out_of_bounds += 1;
+            self.out_of_bounds += 1;
         }
-        if source == StateSource::Truth {
+        if self.source == StateSource::Truth {
             est = bc_truth(&truth, Vector3::from(est.acc_g).cast::<f64>());
         }
-        views.push_back((est, acc_g, gyro_dps));
-        while views.len() > spec.delay_samples + 1 {
-            views.pop_front();
+        self.views.push_back((est, acc_g, gyro_dps));
+        while self.views.len() > spec.delay_samples + 1 {
+            self.views.pop_front();
         }
-        let Some(&(seen, acc_seen, gyro_seen)) = views.front() else {
-            bail!("no estimate yet");
-        };
+        let (seen, acc_seen, gyro_seen) = self.views[0];
 
         // The controller, then Bitcraze's power distribution.
-        match pilot {
+        match &mut *self.pilot {
             Pilot::Bitcraze(c) => {
                 let sp = BcSetpoint {
                     p_m: f32x3(&r.p_m),
@@ -227,10 +233,17 @@ fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) 
                     j_m_s3: f32x3(&r.j_m_s3),
                     yaw_deg: r.yaw_rad.to_degrees() as f32,
                 };
-                capped = c.step(&sp, &acc_seen, &gyro_seen, &seen, tick as u32, &mut motor_n);
+                self.capped = c.step(
+                    &sp,
+                    &acc_seen,
+                    &gyro_seen,
+                    &seen,
+                    tick as u32,
+                    &mut self.motor_n,
+                );
             }
             Pilot::Ours(c) => {
-                if logged {
+                if control {
                     let rot = rot_of(&seen.q_xyzw);
                     let v_world = Vector3::from(seen.v_m_s).cast::<f64>();
                     let state = State {
@@ -242,34 +255,36 @@ fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) 
                     let meas = Measurement {
                         acc_body_m_s2: Some(Vector3::from(acc_seen) * G_M_S2 as f32),
                     };
-                    let out = c.core_step(&state, &Setpoint::from(&r), &meas, dt_ctrl as f32);
+                    let out = c.core_step(&state, &Setpoint::from(r), &meas, self.dt_ctrl as f32);
                     // The command (with the motor-lag lead), as the Crazyflie app hands it over.
                     let w = out.command;
-                    capped = ffi::power_force_torque(
+                    self.capped = ffi::power_force_torque(
                         w.thrust_n,
                         [w.torque_nm.x, w.torque_nm.y, w.torque_nm.z],
-                        &mut motor_n,
+                        &mut self.motor_n,
                     );
                 }
             }
         }
-        let rpm = motor_n.map(|f| ((f.max(0.0) as f64) / kf).sqrt().min(max_rpm));
-        last_rpm = rpm;
-        if logged {
-            log.rpm.push(rpm);
-            log.saturated.push(capped);
-            log.est_p_m.push(seen.p_m.map(f64::from));
-            log.control_steps += 1;
-        }
-        for _ in 0..nsub {
-            plant.step(rpm, dt_phys);
+        let (kf, max_rpm) = (self.kf, self.max_rpm);
+        Actuation {
+            rpm: self
+                .motor_n
+                .map(|f| ((f.max(0.0) as f64) / kf).sqrt().min(max_rpm)),
+            saturated: self.capped,
+            est_p_m: Some(seen.p_m.map(f64::from)),
         }
     }
-    log.wall_s = wall0.elapsed().as_secs_f64();
+}
+
+/// One flight of `pilot` through host-train's loop, behind the [`Stabilizer`].
+fn fly(scenario: &Scenario, name: &str, pilot: &mut Pilot, source: StateSource) -> Result<Flight> {
+    let mut stage = Stabilizer::new(scenario, name, pilot, source)?;
+    let log = fly_stage(scenario, &mut stage)?;
     Ok(Flight {
         report: Report::from_flight(&log, scenario, scenario.path.as_deref()),
         log,
-        estimator_out_of_bounds: out_of_bounds,
+        estimator_out_of_bounds: stage.out_of_bounds,
     })
 }
 
@@ -319,6 +334,63 @@ fn table(
         writeln!(md)?;
     }
     Ok(())
+}
+
+/// One flight's scores in `--scores`' file.
+#[derive(serde::Serialize)]
+struct Scores<'a> {
+    scenario: &'a str,
+    controller: &'a str,
+    /// Position RMSE over t ≥ 5 s (m).
+    rmse_pos_window_m: Option<f64>,
+    max_err_m: f64,
+    crash_time_s: Option<f64>,
+    /// Largest roll/pitch standard deviation over t ≥ 5 s (deg).
+    att_std_deg: Option<f64>,
+    /// Fraction of control ticks whose power distribution capped.
+    saturated_fraction: f64,
+    /// Mean estimate − truth over t ≥ 5 s (m, world).
+    est_pos_bias_m: Option<[f64; 3]>,
+    /// Mean truth − reference over t ≥ 5 s (m, world).
+    pos_err_mean_m: Option<[f64; 3]>,
+    estimator_out_of_bounds: u64,
+}
+
+/// `--scores`: every flight's scores, without wall-clock times.
+fn scores_json(
+    args: &Args,
+    commit: &str,
+    platform: &ffi::Platform,
+    scenarios: &[Scenario],
+    flights: &[Flight],
+) -> serde_json::Value {
+    let rows: Vec<Scores> = flights
+        .iter()
+        .map(|f| {
+            let r = &f.report;
+            Scores {
+                scenario: &r.scenario,
+                controller: &r.controller,
+                rmse_pos_window_m: r.rmse_pos_window_m,
+                max_err_m: r.max_err_m,
+                crash_time_s: r.crash_time_s,
+                att_std_deg: r.att_std_deg,
+                saturated_fraction: r.saturated_fraction,
+                est_pos_bias_m: r.est_pos_bias_m,
+                pos_err_mean_m: r.pos_err_mean_m,
+                estimator_out_of_bounds: f.estimator_out_of_bounds,
+            }
+        })
+        .collect();
+    serde_json::json!({
+        "tool": "tools/bitcraze-loop (regenerate: tools/bitcraze-loop/doc-data.sh)",
+        "crazyflie_firmware_commit": commit,
+        "platform": platform,
+        "state": args.state,
+        "controllers": args.controllers,
+        "scenarios": scenarios.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(),
+        "flights": rows,
+    })
 }
 
 /// Flies every scenario with every controller and prints (and writes) the tables.
@@ -391,6 +463,13 @@ pub fn run(args: &Args) -> Result<()> {
             host_train::io::write_json_atomic(&file, &f.log)?;
         }
         eprintln!("wrote {}/report.json, table.md and logs/", dir.display());
+    }
+    if let Some(path) = &args.scores {
+        let json = scores_json(args, commit, &platform, &scenarios, &flights);
+        let mut text = serde_json::to_string_pretty(&json)?;
+        text.push('\n');
+        host_train::io::write_atomic(path, text.as_bytes())?;
+        eprintln!("wrote {}", path.display());
     }
     Ok(())
 }

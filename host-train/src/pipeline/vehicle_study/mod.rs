@@ -202,6 +202,11 @@ pub struct VehicleStudyArgs {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// Also write the flights' scores and the vehicle as JSON here (no wall-clock times or
+    /// paths): the source of the docs' vehicle tables, `docs/data/vehicle-study-NAME.json`,
+    /// which `tools/vehicle-study-doc-data.sh` regenerates.
+    #[arg(long, value_name = "FILE")]
+    pub scores: Option<PathBuf>,
 }
 
 impl VehicleStudyArgs {
@@ -218,6 +223,7 @@ impl VehicleStudyArgs {
             disturbed: None,
             rotor_loss: None,
             quiet: true,
+            scores: None,
         }
     }
 }
@@ -527,5 +533,22 @@ pub fn run(args: &VehicleStudyArgs) -> Result<StudyReport> {
     };
     write_json_atomic(&args.out.join("report.json"), &report)?;
     write_atomic(&args.out.join("table.md"), table(&report).as_bytes())?;
+    if let Some(path) = &args.scores {
+        let scores = serde_json::json!({
+            "tool": "host-train vehicle-study (regenerate: tools/vehicle-study-doc-data.sh)",
+            "vehicle": args.vehicle,
+            "seeds": args.seeds,
+            "epochs": args.epochs,
+            "flight_s": args.flight_s,
+            "mass_kg": report.vehicle.mass_kg,
+            "rotor_efficiency": report.vehicle.rotor_efficiency,
+            "motor_tau_s": report.motor_tau_s,
+            "scenarios": report.scenarios,
+            "flights": report.flights,
+        });
+        let mut text = serde_json::to_string_pretty(&scores)?;
+        text.push('\n');
+        write_atomic(path, text.as_bytes())?;
+    }
     Ok(report)
 }
