@@ -14,6 +14,7 @@
 pub mod eval;
 pub mod events;
 pub mod margins;
+pub mod report;
 pub mod track;
 pub mod usdrecord;
 
