@@ -357,7 +357,7 @@ def test_upload_rejected_by_the_app(capsys, monkeypatch, tmp_path):
     fake_link(monkeypatch)
     monkeypatch.setattr(hcf.AppMemory, "find", staticmethod(lambda mem: object()))
 
-    def reject(app, blob, wait_active_s):
+    def reject(app, blob, wait_active_s, wait_landing_s):
         raise hcf.UploadError("the app rejected the blob: vehicle mass outside 0.005..5 kg")
 
     monkeypatch.setattr(hcf, "upload", reject)

@@ -63,14 +63,7 @@ fn the_law_parameter_selects_the_composite_law_and_matches_the_native_controller
 #[test]
 fn the_law_parameter_waits_until_the_vehicle_is_not_airborne() {
     let mut shim = Shim::new();
-    let mut plant = scenario("hover").plant();
-    let start = plant.state().p_m.cast::<f32>();
-    shim.supervisor(true, true);
-    shim.set_param_f32("airHeight", 0.0);
-    let hold = move |shim: &mut Shim, _t: f64| {
-        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
-    };
-    fly_shim(&mut shim, &mut plant, 0.5, hold);
+    let (mut plant, _, hold) = take_off_and_hold(&mut shim);
     assert_eq!((shim.log_u8("phase"), shim.log_u8("law")), (2, 1));
     // Written in the air: not applied (the parameter keeps the request).
     shim.set_param_u8("law", 0);

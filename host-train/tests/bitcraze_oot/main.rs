@@ -559,6 +559,21 @@ fn c_path_matches_native_with(
     max_diff_m
 }
 
+/// The hover scenario's plant, flown from the ground for 0.5 s holding its start position (the
+/// supervisor says flying, `airHeight` 0) until the shim is airborne; with that position and the
+/// hold, to fly on.
+fn take_off_and_hold(shim: &mut Shim) -> (Plant, Vector3<f32>, impl Fn(&mut Shim, f64) + Copy) {
+    let mut plant = scenario("hover").plant();
+    let start = plant.state().p_m.cast::<f32>();
+    shim.supervisor(true, true);
+    shim.set_param_f32("airHeight", 0.0);
+    let hold = move |shim: &mut Shim, _t: f64| {
+        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
+    };
+    fly_shim(shim, &mut plant, 0.5, hold);
+    (plant, start, hold)
+}
+
 /// Flies the plant at 1 kHz with `setpoint(shim, t)` choosing the setpoint each tick.
 fn fly_shim(
     shim: &mut Shim,

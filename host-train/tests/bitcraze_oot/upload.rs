@@ -254,14 +254,7 @@ fn torn_and_bad_uploads_are_rejected_and_the_flying_blob_is_untouched() {
 #[test]
 fn an_upload_in_flight_waits_for_the_landing() {
     let mut shim = Shim::new();
-    let mut plant = scenario("hover").plant();
-    let start = plant.state().p_m.cast::<f32>();
-    shim.supervisor(true, true);
-    shim.set_param_f32("airHeight", 0.0);
-    let hold = move |shim: &mut Shim, _t: f64| {
-        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
-    };
-    fly_shim(&mut shim, &mut plant, 0.5, hold);
+    let (mut plant, start, hold) = take_off_and_hold(&mut shim);
     assert_eq!(shim.log_u8("phase"), 2, "airborne");
     let (_, blob) = other_blob(0.030);
     assert!(shim.upload(&blob, &chunks(&blob)));
@@ -369,14 +362,7 @@ fn an_upload_while_an_uploaded_blob_flies_waits_for_the_landing() {
     assert!(shim.upload(&first, &chunks(&first)));
     shim.wait_for_swap();
     assert_eq!(shim.log_u8("blobSrc"), 1);
-    let mut plant = scenario("hover").plant();
-    let start = plant.state().p_m.cast::<f32>();
-    shim.supervisor(true, true);
-    shim.set_param_f32("airHeight", 0.0);
-    let hold = move |shim: &mut Shim, _t: f64| {
-        shim.set_setpoint([ABS; 4], start.into(), [0.0; 3], 0.0, 0.0, 0.0, false)
-    };
-    fly_shim(&mut shim, &mut plant, 0.5, hold);
+    let (mut plant, start, hold) = take_off_and_hold(&mut shim);
     assert_eq!(shim.log_u8("phase"), 2, "airborne");
     let (_, next) = other_blob(0.031);
     assert!(!begin(&mut shim, next.len()), "refused in flight");
