@@ -54,8 +54,9 @@
  * the controller in place, but the vehicle's default gains are too deep for the system task's
  * 1,200 B, where controllerOutOfTreeInit first runs) and hf_self_test(&ctl), which steps ctl
  * itself before the stabilizer may use it; later the model swaps of an upload or a revert
- * (decode in place and self test on ctl, about 2 ms, on the ground only). controllerOutOfTreeInit stays light. Until the self test has passed, the output is
- * zero with HF_SHIM_NOT_READY in the faults log; during a swap the stabilizer does not touch the
+ * (decode in place and self test on ctl, about 2 ms, on the ground only).
+ * controllerOutOfTreeInit stays light. Until the self test has passed, the output is zero with
+ * HF_SHIM_NOT_READY in the faults log; during a swap the stabilizer does not touch the
  * controller and outputs zero with HF_SHIM_SWAPPING. The hand-over is one atomic byte (swapJob):
  * the stabilizer sets it, the app task polls it every HF_SWAP_POLL_MS and clears it when done.
  *

@@ -85,10 +85,10 @@ pub struct CompositeGains {
     /// See [`CompositeGains::fault_ratio`] (s).
     pub fault_baseline_tau_s: f32,
     /// Doubt the assumed motor lag on the force rows: a prediction error that the delivered
-    /// thrust through any lag from none to `motor_tau_s` would explain is not learned (the update sees the error of
-    /// the nearer of the two predictions, or none when the measurement lies between them). A
-    /// model whose lag is longer than the motors' otherwise reads every fast command as a
-    /// disturbance; a fault, whose force no lag explains, is learned as before.
+    /// thrust through any lag from none to `motor_tau_s` would explain is not learned (the
+    /// update sees the error of the nearer of the two predictions, or none when the measurement
+    /// lies between them). A model whose lag is longer than the motors' otherwise reads every
+    /// fast command as a disturbance; a fault, whose force no lag explains, is learned as before.
     pub lag_doubt: bool,
 }
 
@@ -265,11 +265,11 @@ impl Adaptation {
         // Without the motor lag (`lag_doubt`): the delivered wrench against the lagged one.
         let du = (gains.lag_doubt && had_lag).then(|| raw - self.pred.u_lag);
         // With port terms the input acts through its effective gain: g (k ∘ u).
-        let gain_of = |u: Vector4<f32>| match x.port {
-            Some(port) => x.gain * u.component_mul(&port.input_gain),
-            None => x.gain * u,
+        let effective = |u: Vector4<f32>| match x.port {
+            Some(port) => u.component_mul(&port.input_gain),
+            None => u,
         };
-        let gu = gain_of(u);
+        let gu = x.gain * effective(u);
         let gu_v = Vector3::new(gu[0], gu[1], gu[2]);
         let gu_w = Vector3::new(gu[3], gu[4], gu[5]);
         // Measured disturbance force: 𝔭̇_measured − model terms − g u (N, N·m).
@@ -326,11 +326,7 @@ impl Adaptation {
         // of 0, ε and ε − gap.
         let mut z = self.pred.z_f;
         if let Some(du) = du {
-            let du = match x.port {
-                Some(port) => du.component_mul(&port.input_gain),
-                None => du,
-            };
-            let gap = x.gain.fixed_rows::<3>(0) * du;
+            let gap = x.gain.fixed_rows::<3>(0) * effective(du);
             let rows = self
                 .pred
                 .gap_f
