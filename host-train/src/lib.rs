@@ -2,7 +2,39 @@
 //!
 //! The host side of hamflight (std, f64): the SITL quadrotor plant, baseline controllers,
 //! scenario files, data collection and dataset I/O, training, closed-loop evaluation with
-//! reports and plots. The modules are layers; each imports only from its own or lower layers
+//! reports and plots.
+//!
+//! ## The front door
+//!
+//! A handful of names carry a whole job; the layers below are reached through them:
+//!
+//! - [`Scenario`]: a flight (vehicle, reference, wind, faults, sensors) as a typed value;
+//!   [`Scenario::load`] reads the TOML file format.
+//! - [`ControllerSpec`]: the one place where a name such as `adaptive-composite` becomes a
+//!   controller (model source, law, adaptation switch); [`control::by_name`] builds it for a
+//!   scenario's vehicle as a [`Controller`].
+//! - [`fly_scenario`]: the one simulator loop; [`fly_stage`] is the same loop with a [`Stage`]
+//!   (sensing, control and actuation from outside: the Crazyflie's chain, Bitcraze's C code, a
+//!   QEMU link) in place of the sensors and the controller. [`Report`] scores the log.
+//! - [`TrainJob`]: a typed training configuration (serde) that the CLI and Python both build
+//!   and run through [`pipeline::run_train`] (with a printed summary: [`pipeline::run_train_cli`]).
+//!
+//! ```no_run
+//! use host_train::{control::by_name, fly_scenario, Report, Scenario};
+//!
+//! let scenario = Scenario::load("scenarios/paper-spiral.toml")?;
+//! let mut controller = by_name("adaptive", &scenario, None)?;
+//! let log = fly_scenario(&scenario, controller.as_mut());
+//! let report = Report::from_flight(&log, &scenario, None);
+//! println!("RMSE {:.3} cm", report.rmse_pos_m * 100.0);
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+//!
+//! `examples/fly_one.rs` is this program with arguments.
+//!
+//! ## The layers
+//!
+//! The modules are layers; each imports only from its own or lower layers
 //! (`tools/layers.py` checks it):
 //!
 //! 1. [`sim`]: the simulation — the rigid-body CF2X plant ([`sim::plant`]), scenario files
@@ -41,6 +73,8 @@ pub mod train;
 
 pub use control::controller::Controller;
 pub use control::spec::{ControllerSpec, ModelSource};
+pub use fly::{fly_scenario, fly_stage, Report, Stage};
 pub use sim::plant::{Plant, PlantState, VehicleParams};
 pub use sim::scenario::Scenario;
 pub use sim::trajectory::TrajectoryPoint;
+pub use train::TrainJob;

@@ -202,7 +202,7 @@ fn split_history(mut data: Windows, k: usize) -> (Windows, Vec<Window>) {
 const HISTORY_SEGMENT: usize = 10;
 
 /// The constant body-frame acceleration (m/s²) that `history` says `response` misses: the
-/// history is cut into [`HISTORY_SEGMENT`]-step pieces, each rolled out from its logged first
+/// history is cut into `HISTORY_SEGMENT`-step pieces, each rolled out from its logged first
 /// state, and the end velocity's miss (world frame, over the piece's duration) is turned into
 /// the body frame at the piece's middle and averaged. Zero for a history shorter than a piece.
 pub fn history_force_offset<M: hamflight::model::HamiltonianModel>(

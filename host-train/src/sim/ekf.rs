@@ -8,13 +8,13 @@
 //!   update (the "reset" step), so δ = 0 between updates. Covariance P ∈ ℝ⁹ˣ⁹.
 //! - **Prediction** with the mean gyro ω and accelerometer a_s over the interval since the last
 //!   prediction (the Crazyflie predicts at 100 Hz):
-//!   ṗ = R v, v̇ = a − ω × v − g Rᵀe₃, Ṙ = R [ω]×. **In flight the filter keeps only the
+//!   ṗ = R v, v̇ = a − ω × v − g Rᵀe₃, Ṙ = R \[ω\]×. **In flight the filter keeps only the
 //!   accelerometer's z (thrust-axis) component**, a = (0, 0, a_s,z): the paper's quadrotor model
 //!   has no horizontal body force. So a steady horizontal external force, which the
 //!   accelerometer does see, is invisible to the filter, and its velocity and position drift
 //!   until the pose updates pull them back: a steady bias. The Jacobian blocks, with
-//!   ∂(Rv)/∂δ = −R[v]×, ∂(−(R exp δ)ᵀ g e₃)/∂δ = −[g Rᵀe₃]× and δ̇ = −ω × δ:
-//!   F = I + dt [[0, R, −R[v]×], [0, −[ω]×, −[g Rᵀe₃]×], [0, 0, −[ω]×]].
+//!   ∂(Rv)/∂δ = −R`[v]`×, ∂(−(R exp δ)ᵀ g e₃)/∂δ = −[g Rᵀe₃]× and δ̇ = −ω × δ:
+//!   F = I + dt [[0, R, −R`[v]`×], [0, −\[ω\]×, −[g Rᵀe₃]×], [0, 0, −\[ω\]×]].
 //! - **Process noise** per prediction: (σ_acc dt)² on v (x/y and z apart) and (σ_gyro dt)² on δ.
 //! - **Pose update** (motion capture or a Lighthouse-like source): position with σ_pos, and,
 //!   where the source gives attitude, δ_meas = log(Rᵀ R_meas) with σ_att, as scalar updates.

@@ -131,7 +131,7 @@ pub fn split(data: &Windows, heldout_frac: f64, seed: u64) -> (Vec<usize>, Vec<u
     (train, held)
 }
 
-/// One step of a batch of windows as tensors: p [B,3], R [B,3,3], v [B,3], ω [B,3].
+/// One step of a batch of windows as tensors: p `[B,3]`, R `[B,3,3]`, v `[B,3]`, ω `[B,3]`.
 #[derive(Clone, Debug)]
 pub struct StateBatch {
     /// Position (world, m).
@@ -149,9 +149,9 @@ pub struct StateBatch {
 pub struct Batch {
     /// x₀..x_N.
     pub states: Vec<StateBatch>,
-    /// u_k [B,4] of each step k = 0..N−1.
+    /// u_k `[B,4]` of each step k = 0..N−1.
     pub u: Vec<Tensor<2>>,
-    /// The realization index of each window [B].
+    /// The realization index of each window `[B]`.
     pub realization: Tensor<1, Int>,
     /// Batch size.
     pub len: usize,

@@ -44,7 +44,7 @@ pub fn init_weights_with_prior(seed: u64, out_gain: f32, prior: ModelWeights) ->
 pub(crate) const FEATURE_INPUT_WEIGHT: usize = 12;
 /// `w` with g's body x and y force rows set to zero (the g head's output weights and biases of
 /// those rows), exactly zero at every attitude: no input of a quadrotor makes a body x or y
-/// force ([`TrainConfig::zero_unactuated_gain_rows`]).
+/// force (`TrainConfig::zero_unactuated_gain_rows`).
 pub fn with_unactuated_gain_rows_zeroed(w: &ModelWeights) -> ModelWeights {
     let mut out = *w;
     let l2 = &mut out.gain.l2;

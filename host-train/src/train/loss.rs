@@ -14,7 +14,7 @@ use burn::tensor::Tensor;
 const FUSE_MAX_BATCH: usize = 1024;
 
 /// The loss of a batch: Σₙ (ℓ_p + ℓ_R + ℓ_ζ) per window, and its mean over the batch.
-/// `vel_weight` weighs ‖v − v̄‖² inside ℓ_ζ ([`TrainConfig::vel_weight`]).
+/// `vel_weight` weighs ‖v − v̄‖² inside ℓ_ζ (`TrainConfig::vel_weight`).
 pub fn batch_loss(
     model: &TModel,
     c: &Consts,
@@ -148,7 +148,7 @@ pub fn window_loss(
         .mean()
 }
 
-/// ‖log(R̄ Rᵀ)^∨‖² per window [B,1], from sin²θ = ‖vee(E)‖² by the series
+/// ‖log(R̄ Rᵀ)^∨‖² per window `[B,1]`, from sin²θ = ‖vee(E)‖² by the series
 /// θ² = s + s²/3 + 8 s³/45 (s = sin²θ), exact to O(θ⁸) and smooth at θ = 0, where acos is not;
 /// prediction errors over a 5-state window are far below the quarter turn where it would matter.
 pub fn rotation_loss(r_pred: Tensor<3>, r_true: Tensor<3>) -> Tensor<2> {

@@ -2,7 +2,7 @@
 //! the dissipation, the gyrator and the learned potential) from logged flights, through the
 //! core's own rollout: the model that is scored and flown is the one fitted.
 //!
-//! The fit is Levenberg–Marquardt on multi-step rollouts ([`super::lm::lm_fit`], the
+//! The fit is Levenberg–Marquardt on multi-step rollouts (`lm::lm_fit`, the
 //! benchmark's mean-error-norm metric by IRLS). Its parameters are scaled to accelerations so
 //! that one step size suits them all: drag and rate damping in 1/s, the gyrator in rad/s² per
 //! m/s, the tilt stiffness in rad/s² per unit of the world vertical's body components; the blob

@@ -17,7 +17,7 @@ pub struct StateNoise {
     pub att_rad: f64,
     /// Body angular-rate noise σ (rad/s).
     pub rate_rad_s: f64,
-    /// Accelerometer noise σ (m/s², per axis), on [`Plant::accelerometer`]'s reading.
+    /// Accelerometer noise σ (m/s², per axis), on `Plant::accelerometer`'s reading.
     pub acc_m_s2: f64,
 }
 

@@ -30,7 +30,7 @@ pub struct VehicleParams {
     pub ground_effect_coeff: f64,
     /// The vehicle's own rotor efficiencies (worn or chipped props, a weak motor): rotor i makes
     /// this share of its nominal thrust and reaction torque, at all times, on top of any
-    /// [`Disturbance::rotor_efficiency`] (the two multiply). All 1 for the CF2X.
+    /// `Disturbance::rotor_efficiency` (the two multiply). All 1 for the CF2X.
     #[serde(default = "unit_efficiency")]
     pub rotor_efficiency: [f64; 4],
 }

@@ -3,7 +3,7 @@
 //! [`super::loss::window_loss`]) for a minibatch of windows, with the reverse pass (adjoints)
 //! written out, the second-order term through the J⁻¹ head's VJP (∂H/∂R) included.
 //!
-//! Eight windows run in lockstep, one per lane of [`V`] (an `[f32; 8]` whose element-wise ops
+//! Eight windows run in lockstep, one per lane of `V` (an `[f32; 8]` whose element-wise ops
 //! LLVM vectorizes), and the windows are split over the cores with `std::thread::scope`. The
 //! burn path ([`super::loss::batch_loss`] under autodiff) stays the reference it is tested
 //! against (`host-train/tests/train_parity.rs`).

@@ -12,13 +12,13 @@ use super::{
 /// The phase-space state integrated in training: (q, 𝔭) with p, R, 𝔭_v, 𝔭_ω kept apart.
 #[derive(Clone, Debug)]
 pub struct Phase {
-    /// Position [B,3].
+    /// Position `[B,3]`.
     pub p: Tensor<2>,
-    /// Rotation [B,3,3].
+    /// Rotation `[B,3,3]`.
     pub rot: Tensor<3>,
-    /// Linear momentum 𝔭_v [B,3].
+    /// Linear momentum 𝔭_v `[B,3]`.
     pub pv: Tensor<2>,
-    /// Angular momentum 𝔭_ω [B,3].
+    /// Angular momentum 𝔭_ω `[B,3]`.
     pub pw: Tensor<2>,
 }
 
@@ -35,18 +35,18 @@ impl Phase {
 
 /// Per-batch inputs of the ODE that stay constant through a window.
 pub struct Forcing {
-    /// The realized control over CONTROL_SCALE [B,4]: u/CONTROL_SCALE, through the flight's
+    /// The realized control over CONTROL_SCALE `[B,4]`: u/CONTROL_SCALE, through the flight's
     /// rotor gains when they are learned.
     pub u_norm: Tensor<2>,
-    /// a_j of each window [B,p].
+    /// a_j of each window `[B,p]`.
     pub a: Tensor<2>,
-    /// Each window's flight's rotor gain deviations δηⱼ [B,4] (None: not learned).
+    /// Each window's flight's rotor gain deviations δηⱼ `[B,4]` (None: not learned).
     pub rotor_gain: Option<Tensor<2>>,
 }
 
 impl Forcing {
-    /// From the raw control [B,4] and the per-flight parameters [M,p] (the a_j) or [M,p+4]
-    /// (the a_j, then the rotor gain deviations δηⱼ) with indices [B].
+    /// From the raw control `[B,4]` and the per-flight parameters `[M,p]` (the a_j) or [M,p+4]
+    /// (the a_j, then the rotor gain deviations δηⱼ) with indices `[B]`.
     pub fn new(c: &Consts, u: Tensor<2>, per_flight: Tensor<2>, idx: Tensor<1, Int>) -> Self {
         let sel = per_flight.select(0, idx);
         let [_, width] = sel.dims();
@@ -60,7 +60,7 @@ impl Forcing {
         }
     }
 
-    /// The same a_j and rotor gains with another raw control [B,4] (the next step of a window).
+    /// The same a_j and rotor gains with another raw control `[B,4]` (the next step of a window).
     pub fn with_control(&self, c: &Consts, u: Tensor<2>) -> Self {
         Self {
             u_norm: realized(c, u, self.rotor_gain.as_ref()),
@@ -107,7 +107,7 @@ impl Phase {
     }
 }
 
-/// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω with the J⁻¹ head `head` ([`TModel::dh_dr`]).
+/// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω with the J⁻¹ head `head` ([`TModel::dh_dr`](super::TModel::dh_dr)).
 pub fn dh_dr_with(c: &Consts, head: &TMlp, ev: &InertiaEval, pw: Tensor<2>) -> Tensor<3> {
     let b = pw.dims()[0];
 
@@ -149,7 +149,7 @@ pub(super) fn disturbance_from(
 }
 
 /// Paper eq. 1 in (q, 𝔭) at `x` with the heads already evaluated there (`n`; `head`: the J⁻¹
-/// head, for the VJP): [`TModel::phase_rhs`].
+/// head, for the VJP): [`TModel::phase_rhs`](super::TModel::phase_rhs).
 pub fn phase_rhs_with(c: &Consts, x: &Phase, f: &Forcing, n: Nets, head: &TMlp) -> Phase {
     let ev = n.inertia;
     let w = matvec(ev.jinv.clone(), x.pw.clone());
@@ -174,7 +174,7 @@ pub fn phase_rhs_with(c: &Consts, x: &Phase, f: &Forcing, n: Nets, head: &TMlp) 
 
 /// One RK4 step of `dt_s` in (q, 𝔭) with the forcing held constant, the heads at `x` given
 /// (`n_x`) and evaluated by `nets` at the three other stages (`head`: the J⁻¹ head):
-/// [`TModel::rk4`] with J⁻¹(q), g(q), W(q) at the step's start computed once (they are also
+/// `TModel::rk4` with J⁻¹(q), g(q), W(q) at the step's start computed once (they are also
 /// the previous step's end, where the velocities were read).
 pub fn rk4_with(
     c: &Consts,
@@ -193,7 +193,7 @@ pub fn rk4_with(
     x.rk4_combine(&k1, &k2, &k3, &k4, dt_s)
 }
 
-/// ζ → 𝔭 with J⁻¹(q) known ([`TModel::to_phase`]).
+/// ζ → 𝔭 with J⁻¹(q) known (`TModel::to_phase`).
 pub fn to_phase_with(
     c: &Consts,
     ev: &InertiaEval,
@@ -210,7 +210,7 @@ pub fn to_phase_with(
     }
 }
 
-/// 𝔭 → ζ with J⁻¹(q) known ([`TModel::velocities`]).
+/// 𝔭 → ζ with J⁻¹(q) known (`TModel::velocities`).
 pub fn velocities_with(c: &Consts, ev: &InertiaEval, x: &Phase) -> (Tensor<2>, Tensor<2>) {
     (
         x.pv.clone().div_scalar(c.mass_kg),

@@ -11,7 +11,7 @@ use super::Consts;
 /// "Training speed").
 const BROADCAST_MIN_BATCH: usize = 1024;
 
-/// M[B,r,k] x[B,k] → [B,r].
+/// M`[B,r,k]` x`[B,k]` → `[B,r]`.
 pub fn mat_vec_n(m: Tensor<3>, x: Tensor<2>) -> Tensor<2> {
     let [b, r, k] = m.dims();
     if b < BROADCAST_MIN_BATCH {
@@ -20,12 +20,12 @@ pub fn mat_vec_n(m: Tensor<3>, x: Tensor<2>) -> Tensor<2> {
     (m * x.reshape([b, 1, k])).sum_dim(2).reshape([b, r])
 }
 
-/// M[B,3,3] v[B,3] → [B,3].
+/// M`[B,3,3]` v`[B,3]` → `[B,3]`.
 pub fn matvec(m: Tensor<3>, v: Tensor<2>) -> Tensor<2> {
     mat_vec_n(m, v)
 }
 
-/// A Bᵀ for A[B,3,3], B[B,3,3]: (A Bᵀ)ᵢⱼ = Σₖ Aᵢₖ Bⱼₖ.
+/// A Bᵀ for A`[B,3,3]`, B`[B,3,3]`: (A Bᵀ)ᵢⱼ = Σₖ Aᵢₖ Bⱼₖ.
 pub fn mat_mat_t(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
     let n = a.dims()[0];
     if n < BROADCAST_MIN_BATCH {
@@ -36,7 +36,7 @@ pub fn mat_mat_t(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
         .reshape([n, 3, 3])
 }
 
-/// A B for A[B,3,3], B[B,3,3].
+/// A B for A`[B,3,3]`, B`[B,3,3]`.
 pub fn mat_mat(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
     let n = a.dims()[0];
     if n < BROADCAST_MIN_BATCH {
@@ -47,7 +47,7 @@ pub fn mat_mat(a: Tensor<3>, b: Tensor<3>) -> Tensor<3> {
         .reshape([n, 3, 3])
 }
 
-/// Mᵀ v for M[B,3,3], v[B,3].
+/// Mᵀ v for M`[B,3,3]`, v`[B,3]`.
 pub fn mat_t_vec(m: Tensor<3>, v: Tensor<2>) -> Tensor<2> {
     let b = v.dims()[0];
     if b < BROADCAST_MIN_BATCH {
@@ -56,13 +56,13 @@ pub fn mat_t_vec(m: Tensor<3>, v: Tensor<2>) -> Tensor<2> {
     (m * v.reshape([b, 3, 1])).sum_dim(1).reshape([b, 3])
 }
 
-/// Row-major hat map of ω [B,3] → [B,3,3].
+/// Row-major hat map of ω `[B,3]` → `[B,3,3]`.
 pub fn hat(c: &Consts, w: Tensor<2>) -> Tensor<3> {
     let b = w.dims()[0];
     w.matmul(c.hat_map.clone()).reshape([b, 3, 3])
 }
 
-/// Inverse of a batch of 3×3 matrices [B,3,3] by cofactors (rows a, b, c:
+/// Inverse of a batch of 3×3 matrices `[B,3,3]` by cofactors (rows a, b, c:
 /// A⁻¹ = [b×c | c×a | a×b] / a·(b×c)).
 pub fn invert_sym3(m: Tensor<3>) -> Tensor<3> {
     let bsz = m.dims()[0];

@@ -244,9 +244,9 @@ pub struct TModel {
 pub struct InertiaEval {
     /// The net's trace (for JVP/VJP).
     pub trace: Trace,
-    /// L [B,3,3].
+    /// L `[B,3,3]`.
     pub l: Tensor<3>,
-    /// J⁻¹ [B,3,3].
+    /// J⁻¹ `[B,3,3]`.
     pub jinv: Tensor<3>,
 }
 
@@ -341,7 +341,7 @@ impl FusedHeads {
         }
     }
 
-    /// The J⁻¹ head (for [`TModel::dh_dr_with`]).
+    /// The J⁻¹ head (for [`dh_dr_with`]).
     pub fn inertia_head(&self) -> &TMlp {
         &self.inertia
     }
@@ -402,7 +402,7 @@ impl TModel {
         }
     }
 
-    /// d/dt J⁻¹ along Ṙ (a JVP of the head), [B,3,3].
+    /// d/dt J⁻¹ along Ṙ (a JVP of the head), `[B,3,3]`.
     pub fn inertia_inv_dot(&self, c: &Consts, ev: &InertiaEval, rot_dot: Tensor<3>) -> Tensor<3> {
         let b = rot_dot.dims()[0];
         let dl = self
@@ -414,12 +414,12 @@ impl TModel {
         (t.clone() + t.swap_dims(1, 2)).mul_scalar(INERTIA_INV_SCALE_PER_KG_M2)
     }
 
-    /// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω, rows i, [B,3,3] (a VJP of the head).
+    /// ∂(½ 𝔭_ωᵀ J⁻¹(q) 𝔭_ω)/∂rᵢ at fixed 𝔭_ω, rows i, `[B,3,3]` (a VJP of the head).
     pub fn dh_dr(&self, c: &Consts, ev: &InertiaEval, pw: Tensor<2>) -> Tensor<3> {
         dh_dr_with(c, &self.inertia, ev, pw)
     }
 
-    /// g(q) u as a body force and torque ([B,3] each), from u / CONTROL_SCALE.
+    /// g(q) u as a body force and torque (`[B,3]` each), from u / CONTROL_SCALE.
     pub fn control_wrench(
         &self,
         c: &Consts,
@@ -439,7 +439,7 @@ impl TModel {
         y.reshape([b, 6, p])
     }
 
-    /// W(q) [B,6,p] (force rows m Rᵀ n_k, torque rows TORQUE_SCALE_NM t_k).
+    /// W(q) `[B,6,p]` (force rows m Rᵀ n_k, torque rows TORQUE_SCALE_NM t_k).
     pub fn features(&self, c: &Consts, rot: &Tensor<3>) -> Tensor<3> {
         let o = self.feature_output(rot);
         let [b, _, p] = o.dims();
@@ -453,7 +453,7 @@ impl TModel {
         Tensor::cat(vec![force, torque], 1)
     }
 
-    /// d = W a as a body force and torque ([B,3] each).
+    /// d = W a as a body force and torque (`[B,3]` each).
     pub fn disturbance(&self, c: &Consts, rot: &Tensor<3>, a: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
         let b = rot.dims()[0];
         let o = self.disturbance.forward(rot.clone().reshape([b, 9])).y;
