@@ -1,7 +1,7 @@
 /*
  * host_harness.c: drives the real hamflight_oot.c on the host the way crazyflie-firmware's
  * stabilizer does, and implements the stubs of the stand-in headers. Host tests only (see
- * README.md); the Rust tests declare these functions in host-train/tests/bitcraze_oot/main.rs.
+ * README.md); the Rust tests declare these functions in host-train/tests/bitcraze_oot/ffi.rs.
  */
 #define _POSIX_C_SOURCE 200809L
 

@@ -60,9 +60,18 @@ use std::path::PathBuf;
 
 use clap::Parser;
 
+mod clock;
 mod crtp;
+mod faults;
 mod flight;
+mod launch;
+mod motors;
+mod params;
+mod pilot;
+mod plant;
 mod record;
+mod summary;
+mod timeline;
 mod trajectory;
 
 #[derive(Parser, Debug)]
