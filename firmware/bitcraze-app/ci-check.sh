@@ -21,6 +21,10 @@
 #      Bitcraze's own callees (the supervisor queries) are not in this link; build-in-tree.sh
 #      measures the same function in the linked cf2.elf. Without the compiler this step fails
 #      under CI=true and is skipped, with a message, elsewhere.
+#   9. the run-time high-water marks of the entry points (hf_step under both laws, hf_self_test,
+#      hf_use_model, hf_model_load, hf_init, hf_blob_check) on a Cortex-M4F under QEMU
+#      (qemu-stack.sh: the object of step 2 in a bare-metal harness), each at most its static
+#      bound from stack-estimate.py. Without QEMU or the compiler: as step 8.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -127,4 +131,13 @@ elif [ "${CI:-}" = true ]; then
     fail "arm-none-eabi-gcc not found (apt-get install gcc-arm-none-eabi): needed for controllerOutOfTree's stack"
 else
     echo "ci-check: SKIPPED controllerOutOfTree's stack: arm-none-eabi-gcc not found (apt-get install gcc-arm-none-eabi)"
+fi
+
+# 9. measured high-water marks under QEMU, against the static bounds.
+if command -v arm-none-eabi-gcc >/dev/null 2>&1 && command -v qemu-system-arm >/dev/null 2>&1; then
+    "$here/qemu-stack.sh" || fail "a measured stack high-water mark is over its static bound (qemu-stack.sh)"
+elif [ "${CI:-}" = true ]; then
+    fail "arm-none-eabi-gcc or qemu-system-arm not found: needed for the measured stacks (qemu-stack.sh)"
+else
+    echo "ci-check: SKIPPED the measured stacks: arm-none-eabi-gcc or qemu-system-arm not found"
 fi

@@ -9,6 +9,8 @@ With =BUDGET (bytes), exits 1 when FUNCTION needs more.
 
 build-in-tree.sh runs it on cf2.elf for the two tasks that run hamflight code; ci-check.sh on
 the Rust object alone, for hf_step, and on the shim linked with it, for controllerOutOfTree.
+qemu-stack.sh and firmware/report.sh set its bounds beside high-water marks measured under QEMU
+(a bound below a measurement means a path is missing here).
 """
 import re
 import subprocess

@@ -237,6 +237,11 @@ impl<M: HamiltonianModel> ControlLoop<M> {
         self.controller.as_ref().err().copied()
     }
 
+    /// The controller, unless the blob check failed.
+    pub fn controller_mut(&mut self) -> Option<&mut FlightController<M>> {
+        self.controller.as_mut().ok()
+    }
+
     /// Why the motors are off, or `Running`.
     pub fn status(&self) -> LinkStatus {
         self.status

@@ -89,7 +89,8 @@ fn main() -> ! {
 #[cfg(feature = "bench")]
 mod bench {
     use super::*;
-    use hamflight_firmware::control_loop::DT_S;
+    use hamflight::{FlightController, Measurement, Output, Setpoint, State};
+    use hamflight_firmware::control_loop::{Model, DT_S};
     use hamflight_firmware::link::{Input, WireState};
     use libm::{cosf, sinf};
     use nalgebra::{Rotation3, Vector3};
@@ -115,6 +116,8 @@ mod bench {
         n
     }
 
+    // Inlined (into the probes too): the benchmark's frame stays as it was.
+    #[inline(always)]
     fn input(k: u32) -> Input {
         let t = k as f32 * DT_S;
         let w = core::f32::consts::TAU / 10.0;
@@ -167,10 +170,134 @@ mod bench {
             ),
             None => hprintln!("BENCH no report"),
         }
+        stack_report();
         debug::exit(debug::EXIT_SUCCESS);
         loop {
             cortex_m::asm::wfi();
         }
+    }
+
+    /// The stack probes, after the counted run (and after the stack peaks of its report), on the
+    /// controller it flew: they change nothing the BENCH line counts. Prints the STACK line.
+    /// Out of line, so that the benchmark's frame, under every tick, is what it was without them.
+    #[inline(never)]
+    fn stack_report() {
+        match runtime::with_finished_controller(probe_stacks) {
+            Some(s) => hprintln!(
+                "STACK step={} step_stress={} window={}",
+                s.step,
+                s.step_stress,
+                runtime::PROBE_WINDOW_BYTES
+            ),
+            None => hprintln!("STACK no controller"),
+        }
+    }
+
+    /// Measured stack high-water marks (bytes, from the call: [`runtime::measure_stack`]).
+    struct Stacks {
+        /// [`step`] over the benchmark's inputs.
+        step: u32,
+        /// [`step`] over the cases the benchmark does not fly ([`stress_inputs`]).
+        step_stress: u32,
+    }
+
+    /// The controller's step as the Crazyflie app's `hf_step` runs it (`step_into`, the output
+    /// written in place): one call that [`runtime::measure_stack`] measures and
+    /// `stack-estimate.py` bounds. The tick handler inlines its own copy of the step, so this is
+    /// the step's own stack, without the handler's frame around it.
+    #[inline(never)]
+    fn step(
+        ctl: &mut FlightController<Model>,
+        state: &State,
+        sp: &Setpoint,
+        meas: &Measurement,
+        dt_s: f32,
+        out: &mut Output,
+    ) {
+        ctl.step_into(state, sp, meas, dt_s, out);
+    }
+
+    /// [`step`]'s stack on one input (interrupts off: nothing else lands in the window).
+    fn step_stack(
+        ctl: &mut FlightController<Model>,
+        state: &State,
+        sp: &Setpoint,
+        meas: &Measurement,
+        dt_s: f32,
+    ) -> u32 {
+        let mut out = Output::default();
+        cortex_m::interrupt::free(|_| {
+            runtime::measure_stack(|| step(ctl, state, sp, meas, dt_s, &mut out)).1
+        })
+    }
+
+    /// The benchmark's inputs again, then [`stress_inputs`].
+    fn probe_stacks(ctl: &mut FlightController<Model>) -> Stacks {
+        let none = Measurement::default();
+        let mut step = 0;
+        for k in 0..STEPS {
+            let i = input(k);
+            let sp = i.setpoint.unwrap_or_default();
+            step = step.max(step_stack(ctl, &State::from(&i.state), &sp, &none, DT_S));
+        }
+        let mut step_stress = 0;
+        for k in 0..STRESS_STEPS {
+            let (state, sp, meas, dt_s) = stress_inputs(k);
+            step_stress = step_stress.max(step_stack(ctl, &state, &sp, &meas, dt_s));
+        }
+        Stacks { step, step_stress }
+    }
+
+    /// Steps of [`stress_inputs`].
+    const STRESS_STEPS: u32 = 400;
+
+    /// What the benchmark's flight near the reference never does, a block of steps each: the
+    /// accelerometer present (the composite law's measured branch; the link carries none),
+    /// rotor saturation and the tilt limit (metres and radians off, fast), yaw across ±π with a
+    /// fast yaw reference, the fault paths (a non-finite state, a bad dt), then the benchmark's
+    /// flight again with the accelerometer.
+    fn stress_inputs(k: u32) -> (State, Setpoint, Measurement, f32) {
+        let i = input(k);
+        let mut state = State::from(&i.state);
+        let mut sp = i.setpoint.unwrap_or_default();
+        let mut meas = Measurement {
+            acc_body_m_s2: Some(Vector3::new(0.3, -0.2, 9.6)),
+        };
+        let mut dt_s = DT_S;
+        let t = k as f32 * DT_S;
+        match k / 50 {
+            0 | 7 => {}
+            1 => {
+                // Far and fast: every rotor at a limit, the tilt limited.
+                state.p_m += Vector3::new(2.0, -1.5, -1.0);
+                state.v_body_m_s = Vector3::new(-3.0, 2.0, 1.5);
+                state.rot = Rotation3::from_euler_angles(0.9, -0.7, 0.3).into_inner();
+                state.w_body_rad_s = Vector3::new(6.0, -5.0, 3.0);
+                meas.acc_body_m_s2 = None;
+            }
+            2 => {
+                state.p_m += Vector3::new(-2.0, 1.5, 1.0);
+                state.rot = Rotation3::from_euler_angles(-1.2, 1.0, -2.5).into_inner();
+                state.w_body_rad_s = Vector3::new(-8.0, 7.0, -4.0);
+            }
+            3 => {
+                // Yaw across ±π, the reference turning fast.
+                state.rot = Rotation3::from_euler_angles(0.0, 0.0, -3.1 + 0.01 * t).into_inner();
+                sp.yaw_rad = 3.1;
+                sp.yaw_rate_rad_s = 4.0;
+            }
+            4 => {
+                // A huge yaw reference: the whole-turn wrap before the reduction.
+                sp.yaw_rad = 1.0e5 + t;
+            }
+            5 => {
+                state.p_m.x = f32::NAN;
+            }
+            _ => {
+                dt_s = 0.0;
+            }
+        }
+        (state, sp, meas, dt_s)
     }
 }
 
