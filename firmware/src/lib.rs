@@ -20,6 +20,8 @@ pub mod link;
 pub mod motor;
 #[cfg(target_os = "none")]
 pub mod runtime;
+#[cfg(target_os = "none")]
+pub mod stack;
 
 /// The weight blob embedded at build time (`HAMFLIGHT_WEIGHTS`, default
 /// `weights/default.hfw`; see `build.rs`).
