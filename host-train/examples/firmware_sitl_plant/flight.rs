@@ -328,20 +328,24 @@ pub fn run() -> Result<()> {
     // The firmware's mixer (quadSysId, read by power_distribution_sitl.c's force/torque mode)
     // configured for the vehicle it flies: arm·0.707 = the plant's rotor offset, thrust-to-torque
     // = km / kf.
-    let mixer_params: Vec<(&str, f32)> = if args.stock_mixer {
+    // Then the --param ones: (full name, value, written as u8).
+    let mut mixer_params: Vec<(String, f32, bool)> = if args.stock_mixer {
         Vec::new()
     } else {
         vec![
             (
-                "armLength",
+                "quadSysId.armLength".into(),
                 (plant.params.arm_xy_m / std::f64::consts::FRAC_1_SQRT_2) as f32,
+                false,
             ),
             (
-                "thrustToTorque",
+                "quadSysId.thrustToTorque".into(),
                 (plant.params.km_nm_per_rpm2 / plant.params.kf_n_per_rpm2) as f32,
+                false,
             ),
         ]
     };
+    mixer_params.extend(args.params.iter().cloned());
 
     // Lock-step: the loop sends the IMU packet last and waits for the firmware's tick.
     let mut link = if args.lockstep {
@@ -451,10 +455,9 @@ pub fn run() -> Result<()> {
         if let (Some(t0), None) = (stab_started_at, mixer_done_at) {
             if k.is_multiple_of(2) {
                 let sh = shared.lock().unwrap();
-                for (id, (name, _)) in mixer_ids.iter_mut().zip(&mixer_params) {
-                    let full = format!("quadSysId.{name}");
+                for (id, (name, ..)) in mixer_ids.iter_mut().zip(&mixer_params) {
                     if id.is_none() {
-                        *id = sh.param_toc.iter().find(|(_, n)| *n == full).map(|x| x.0);
+                        *id = sh.param_toc.iter().find(|(_, n)| n == name).map(|x| x.0);
                     }
                 }
                 if reset_id.is_none() {
@@ -470,11 +473,11 @@ pub fn run() -> Result<()> {
                 drop(sh);
                 let need_reset = args.estimator_reset_s.is_some() && reset_id.is_none();
                 if mixer_ids.iter().all(Option::is_some) && !need_reset {
-                    let pending: Vec<(u16, f32)> = mixer_ids
+                    let pending: Vec<(u16, f32, bool)> = mixer_ids
                         .iter()
                         .zip(&mixer_params)
-                        .filter_map(|(id, (_, v))| id.map(|id| (id, *v)))
-                        .filter(|(id, _)| !written.contains(id))
+                        .filter_map(|(id, (_, v, u8))| id.map(|id| (id, *v, *u8)))
+                        .filter(|(id, ..)| !written.contains(id))
                         .collect();
                     if pending.is_empty() {
                         mixer_done_at = Some(t);
@@ -484,14 +487,25 @@ pub fn run() -> Result<()> {
                             toc_next
                         );
                     } else if k.is_multiple_of(20) {
-                        for (id, v) in pending {
-                            let _ = sock.send_to(&param_write_float(id, v), fw_addr);
+                        for (id, v, u8) in pending {
+                            let pk = if u8 {
+                                param_write_u8(id, v as u8)
+                            } else {
+                                param_write_float(id, v)
+                            };
+                            let _ = sock.send_to(&pk, fw_addr);
                         }
                     }
                 } else if toc_end && need_reset {
                     bail!("the firmware has no parameter kalman.resetEstimation");
                 } else if toc_end {
-                    bail!("the firmware has no parameter quadSysId.armLength / thrustToTorque");
+                    let missing: Vec<&str> = mixer_ids
+                        .iter()
+                        .zip(&mixer_params)
+                        .filter(|(id, _)| id.is_none())
+                        .map(|(_, p)| p.0.as_str())
+                        .collect();
+                    bail!("the firmware has no parameter {}", missing.join(", "));
                 } else {
                     if have_next {
                         toc_next += 1;
@@ -958,12 +972,15 @@ pub fn run() -> Result<()> {
             "mixer: the firmware's own (quadSysId armLength 0.046 m, thrustToTorque 0.005964552 m)"
         );
     }
-    for ((name, v), id) in mixer_params.iter().zip(&mixer_ids) {
+    for ((name, v, u8), id) in mixer_params.iter().zip(&mixer_ids) {
         let echo = id
             .and_then(|id| param_written.iter().find(|w| w.0 == id))
-            .map(|w| format!("firmware echoed {:.6}", f32::from_le_bytes(w.1)))
+            .map(|w| match u8 {
+                true => format!("firmware echoed {}", w.1[0]),
+                false => format!("firmware echoed {:.6}", f32::from_le_bytes(w.1)),
+            })
             .unwrap_or_else(|| "NOT SET".into());
-        println!("mixer: quadSysId.{name} (id {id:?}) = {v:.6}: {echo}");
+        println!("param: {name} (id {id:?}) = {v:.6}: {echo}");
     }
     for l in &hamflight_lines {
         println!("  console: {l}");
