@@ -186,6 +186,11 @@ struct Args {
     /// Seed of --motor-jitter-ms and --motor-drop.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Set a firmware parameter before the take-off, as the mixer's are (repeatable):
+    /// `GROUP.NAME=VALUE` writes a float, `GROUP.NAME=VALUE:u8` an 8-bit integer; e.g.
+    /// `hamflight.maxTilt=0.8`, `stabilizer.controller=2:u8` (Bitcraze's Mellinger).
+    #[arg(long = "param", value_name = "GROUP.NAME=VALUE[:u8]", value_parser = parse_param)]
+    params: Vec<(String, f32, bool)>,
     /// Directory for flight.csv, flight.svg, console.log, summary.json.
     #[arg(long, default_value = "target/firmware-sitl/flight")]
     out: PathBuf,
@@ -220,9 +225,43 @@ fn positive_hz(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `GROUP.NAME=VALUE[:u8]` -> (name, value, written as u8).
+fn parse_param(s: &str) -> Result<(String, f32, bool), String> {
+    let (name, v) = s
+        .split_once('=')
+        .filter(|(n, _)| n.contains('.'))
+        .ok_or_else(|| format!("{s}: expected GROUP.NAME=VALUE[:u8]"))?;
+    let (v, u8) = v.strip_suffix(":u8").map_or((v, false), |v| (v, true));
+    let x: f32 = v.parse().map_err(|_| format!("{s}: {v} is not a number"))?;
+    if u8 && !(x.fract() == 0.0 && (0.0..=255.0).contains(&x)) {
+        return Err(format!("{s}: {v} is not a u8"));
+    }
+    Ok((name.to_string(), x, u8))
+}
+
 fn main() {
     if let Err(e) = flight::run() {
         eprintln!("firmware_sitl_plant: {e:#}");
         std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_param;
+
+    #[test]
+    fn params_parse() {
+        assert_eq!(
+            parse_param("hamflight.maxTilt=0.8"),
+            Ok(("hamflight.maxTilt".into(), 0.8, false))
+        );
+        assert_eq!(
+            parse_param("stabilizer.controller=2:u8"),
+            Ok(("stabilizer.controller".into(), 2.0, true))
+        );
+        for bad in ["maxTilt=0.8", "a.b", "a.b=x", "a.b=2.5:u8", "a.b=300:u8"] {
+            assert!(parse_param(bad).is_err(), "{bad}");
+        }
     }
 }

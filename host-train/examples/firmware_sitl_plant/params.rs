@@ -1,17 +1,18 @@
 //! The parameters set over CRTP before the take-off: the firmware's mixer constants
-//! (`quadSysId.armLength`, `thrustToTorque`) set to the flown vehicle's, found by reading the
-//! parameter TOC, which also gives `kalman.resetEstimation`'s id for `--estimator-reset-s`.
+//! (`quadSysId.armLength`, `thrustToTorque`) set to the flown vehicle's and `--param`'s, found
+//! by reading the parameter TOC, which also gives `kalman.resetEstimation`'s id for `--estimator-reset-s`.
 
 use anyhow::{bail, Result};
-use host_train::io::{param_toc_request, param_write_float};
+use host_train::io::{param_toc_request, param_write_float, param_write_u8};
 use host_train::Plant;
 
 use crate::launch::Link;
 use crate::Args;
 
 pub struct Params {
-    /// The mixer parameters to set (none with `--stock-mixer`): name in quadSysId, value.
-    pub mixer: Vec<(&'static str, f32)>,
+    /// The parameters to set: the mixer's (none with `--stock-mixer`), then `--param`'s: full
+    /// name, value, written as u8.
+    pub mixer: Vec<(String, f32, bool)>,
     /// Their ids, from the TOC (scanned from id 0); then they are written by id.
     pub mixer_ids: Vec<Option<u16>>,
     toc_next: u16,
@@ -27,20 +28,23 @@ impl Params {
         // The firmware's mixer (quadSysId, read by power_distribution_sitl.c's force/torque
         // mode) configured for the vehicle it flies: arm·0.707 = the plant's rotor offset,
         // thrust-to-torque = km / kf.
-        let mixer_params: Vec<(&str, f32)> = if args.stock_mixer {
+        let mut mixer_params: Vec<(String, f32, bool)> = if args.stock_mixer {
             Vec::new()
         } else {
             vec![
                 (
-                    "armLength",
+                    "quadSysId.armLength".into(),
                     (plant.params.arm_xy_m / std::f64::consts::FRAC_1_SQRT_2) as f32,
+                    false,
                 ),
                 (
-                    "thrustToTorque",
+                    "quadSysId.thrustToTorque".into(),
                     (plant.params.km_nm_per_rpm2 / plant.params.kf_n_per_rpm2) as f32,
+                    false,
                 ),
             ]
         };
+        mixer_params.extend(args.params.iter().cloned());
         Params {
             mixer_ids: vec![None; mixer_params.len()],
             mixer: mixer_params,
@@ -66,10 +70,9 @@ impl Params {
         if let (Some(t0), None) = (stab_started_at, self.mixer_done_at) {
             if k.is_multiple_of(2) {
                 let sh = link.shared.lock().unwrap();
-                for (id, (name, _)) in self.mixer_ids.iter_mut().zip(&self.mixer) {
-                    let full = format!("quadSysId.{name}");
+                for (id, (name, ..)) in self.mixer_ids.iter_mut().zip(&self.mixer) {
                     if id.is_none() {
-                        *id = sh.param_toc.iter().find(|(_, n)| *n == full).map(|x| x.0);
+                        *id = sh.param_toc.iter().find(|(_, n)| n == name).map(|x| x.0);
                     }
                 }
                 if self.reset_id.is_none() {
@@ -85,12 +88,12 @@ impl Params {
                 drop(sh);
                 let need_reset = args.estimator_reset_s.is_some() && self.reset_id.is_none();
                 if self.mixer_ids.iter().all(Option::is_some) && !need_reset {
-                    let pending: Vec<(u16, f32)> = self
+                    let pending: Vec<(u16, f32, bool)> = self
                         .mixer_ids
                         .iter()
                         .zip(&self.mixer)
-                        .filter_map(|(id, (_, v))| id.map(|id| (id, *v)))
-                        .filter(|(id, _)| !written.contains(id))
+                        .filter_map(|(id, (_, v, u8))| id.map(|id| (id, *v, *u8)))
+                        .filter(|(id, ..)| !written.contains(id))
                         .collect();
                     if pending.is_empty() {
                         self.mixer_done_at = Some(t);
@@ -100,14 +103,25 @@ impl Params {
                             self.toc_next
                         );
                     } else if k.is_multiple_of(20) {
-                        for (id, v) in pending {
-                            link.send(&param_write_float(id, v));
+                        for (id, v, u8) in pending {
+                            link.send(&if u8 {
+                                param_write_u8(id, v as u8)
+                            } else {
+                                param_write_float(id, v)
+                            });
                         }
                     }
                 } else if toc_end && need_reset {
                     bail!("the firmware has no parameter kalman.resetEstimation");
                 } else if toc_end {
-                    bail!("the firmware has no parameter quadSysId.armLength / thrustToTorque");
+                    let missing: Vec<&str> = self
+                        .mixer_ids
+                        .iter()
+                        .zip(&self.mixer)
+                        .filter(|(id, _)| id.is_none())
+                        .map(|(_, p)| p.0.as_str())
+                        .collect();
+                    bail!("the firmware has no parameter {}", missing.join(", "));
                 } else {
                     if have_next {
                         self.toc_next += 1;

@@ -125,12 +125,15 @@ pub fn write(f: &Flown) -> Result<()> {
             "mixer: the firmware's own (quadSysId armLength 0.046 m, thrustToTorque 0.005964552 m)"
         );
     }
-    for ((name, v), id) in params.mixer.iter().zip(&params.mixer_ids) {
+    for ((name, v, u8), id) in params.mixer.iter().zip(&params.mixer_ids) {
         let echo = id
             .and_then(|id| closed.param_written.iter().find(|w| w.0 == id))
-            .map(|w| format!("firmware echoed {:.6}", f32::from_le_bytes(w.1)))
+            .map(|w| match u8 {
+                true => format!("firmware echoed {}", w.1[0]),
+                false => format!("firmware echoed {:.6}", f32::from_le_bytes(w.1)),
+            })
             .unwrap_or_else(|| "NOT SET".into());
-        println!("mixer: quadSysId.{name} (id {id:?}) = {v:.6}: {echo}");
+        println!("param: {name} (id {id:?}) = {v:.6}: {echo}");
     }
     for l in &closed.hamflight_lines {
         println!("  console: {l}");

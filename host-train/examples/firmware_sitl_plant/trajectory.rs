@@ -347,6 +347,7 @@ impl Upload {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     #[test]
     fn pieces_follow_the_figure() {
@@ -358,6 +359,30 @@ mod tests {
             // ten septic pieces: within 0.2 mm of the figure (0.165 mm at worst)
             assert!((e.p_m.x - f[0][0]).abs() < 2e-4 && (e.p_m.y - f[1][0]).abs() < 2e-4);
             assert!((e.v_m_s.x - f[0][1]).abs() < 2e-3, "t {t}");
+        }
+    }
+
+    /// host-train's scenario kind `figure_eight` (the same path flown without the firmware,
+    /// `host-train eval`, `bitcraze-loop`) is this figure.
+    #[test]
+    fn the_scenario_kind_is_this_figure() {
+        let s = host_train::Scenario::from_toml_str(
+            "duration_s = 12.0\n[trajectory]\nkind = \"figure_eight\"\nstart_m = [0.0, 0.0, 1.0]\n\
+             half_width_m = 0.5\nduration_s = 10.0\nstart_s = 1.0\n",
+            "test",
+            "fig8",
+        )
+        .unwrap();
+        for i in 0..=1200 {
+            let t = i as f64 * 0.01;
+            let r = s.reference(t);
+            let f = figure_eight(0.5, 10.0, t - 1.0);
+            let got = [r.p_m - Vector3::z(), r.v_m_s, r.a_m_s2, r.j_m_s3];
+            for (k, g) in got.iter().enumerate() {
+                for axis in 0..3 {
+                    assert!((g[axis] - f[axis][k]).abs() < 1e-9, "t {t} derivative {k}");
+                }
+            }
         }
     }
 

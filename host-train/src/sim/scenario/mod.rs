@@ -26,6 +26,11 @@
 //! # kind = "diamond"             # visits waypoints_m in a loop, segment_s per leg (smooth,
 //! #                              # zero velocity/acceleration/jerk at each waypoint),
 //! # waypoints_m = [[..],[..]]; segment_s = 2.0; hold_s = 0.0   # pausing hold_s at each
+//! # kind = "figure_eight"        # p* = start_m + (a sin θ, (a/2) sin 2θ, 0), θ going 0 → 2π
+//! #                              # in duration_s along the septic smooth step (at rest at
+//! #                              # both ends), then p* = start_m: firmware_sitl_plant's
+//! #                              # --pilot trajectory figure
+//! # start_m = [0,0,1]; half_width_m = 0.5; duration_s = 10.0; start_s = 0.0  # begins then
 //!
 //! [disturbance]                  # optional; all defaults = none
 //! wind_m_s2 = [0.75, 0.75, 0.0]  # world wind as specific force w (m/s²): force m·w
@@ -133,6 +138,19 @@ pub enum Trajectory {
         /// Pause at each waypoint (s).
         #[serde(default)]
         hold_s: f64,
+    },
+    /// One figure of eight from rest to rest: x = a sin θ, y = (a/2) sin 2θ about `start_m`,
+    /// θ = 2π s(t / duration_s) with the septic smooth step s; `start_m` before and after.
+    FigureEight {
+        /// Start and end point, the figure's crossing (m).
+        start_m: [f64; 3],
+        /// a: half the figure's extent along x (m); along y it is a / 2.
+        half_width_m: f64,
+        /// Duration of the figure (s).
+        duration_s: f64,
+        /// When the figure begins (s); `start_m` until then.
+        #[serde(default)]
+        start_s: f64,
     },
 }
 
@@ -527,6 +545,48 @@ pub fn trajectory_point(tr: &Trajectory, t: f64) -> TrajectoryPoint {
                 yaw_rate_rad_s: 0.0,
             }
         }
+        Trajectory::FigureEight {
+            start_m,
+            half_width_m,
+            duration_s,
+            start_s,
+        } => figure_eight(v3(*start_m), *half_width_m, *duration_s, t - start_s),
+    }
+}
+
+/// The figure of eight of [`Trajectory::FigureEight`] at `t` (before 0 and after the end: at
+/// rest on `start`).
+pub fn figure_eight(start: Vector3<f64>, a: f64, dur: f64, t: f64) -> TrajectoryPoint {
+    let (s0, s1, s2, s3) = septic((t / dur).clamp(0.0, 1.0));
+    let tau = core::f64::consts::TAU;
+    // θ and its first three time derivatives
+    let th = [
+        tau * s0,
+        tau * s1 / dur,
+        tau * s2 / dur.powi(2),
+        tau * s3 / dur.powi(3),
+    ];
+    // f(θ) with its θ-derivatives, then the chain rule to the third time derivative
+    let chain = |f: [f64; 4]| {
+        [
+            f[0],
+            f[1] * th[1],
+            f[2] * th[1] * th[1] + f[1] * th[2],
+            f[3] * th[1].powi(3) + 3.0 * f[2] * th[1] * th[2] + f[1] * th[3],
+        ]
+    };
+    let (sn, cs) = th[0].sin_cos();
+    let (s2t, c2t) = (2.0 * th[0]).sin_cos();
+    let b = a / 2.0;
+    let x = chain([a * sn, a * cs, -a * sn, -a * cs]);
+    let y = chain([b * s2t, 2.0 * b * c2t, -4.0 * b * s2t, -8.0 * b * c2t]);
+    TrajectoryPoint {
+        p_m: start + Vector3::new(x[0], y[0], 0.0),
+        v_m_s: Vector3::new(x[1], y[1], 0.0),
+        a_m_s2: Vector3::new(x[2], y[2], 0.0),
+        j_m_s3: Vector3::new(x[3], y[3], 0.0),
+        yaw_rad: 0.0,
+        yaw_rate_rad_s: 0.0,
     }
 }
 
@@ -555,4 +615,53 @@ pub fn septic(t: f64) -> (f64, f64, f64, f64) {
         t2 * (420.0 - 1680.0 * t + 2100.0 * t2 - 840.0 * t3),
         t * (840.0 - 5040.0 * t + 8400.0 * t2 - 4200.0 * t3),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `kind = "figure_eight"`: parsed, at rest on `start_m` before `start_s` and after the end,
+    /// each derivative the finite difference of the one below, the figure's extent a × a/2.
+    #[test]
+    fn figure_eight_kind() {
+        let s = Scenario::from_toml_str(
+            "duration_s = 12.0\n[trajectory]\nkind = \"figure_eight\"\nstart_m = [0.0, 0.0, 1.0]\n\
+             half_width_m = 0.5\nduration_s = 10.0\nstart_s = 1.0\n",
+            "test",
+            "fig8",
+        )
+        .unwrap();
+        let start = Vector3::new(0.0, 0.0, 1.0);
+        for t in [0.0, 0.5, 1.0, 11.0, 12.0] {
+            let r = s.reference(t);
+            assert!((r.p_m - start).norm() < 1e-12, "t {t}: {:?}", r.p_m);
+            assert!(
+                r.v_m_s.norm() + r.a_m_s2.norm() + r.j_m_s3.norm() < 1e-9,
+                "t {t}"
+            );
+        }
+        let (mut xmax, mut ymax) = (0.0f64, 0.0f64);
+        let h = 1e-5;
+        for i in 1..200 {
+            let t = 1.0 + 10.0 * i as f64 / 200.0;
+            let (a, r, b) = (s.reference(t - h), s.reference(t), s.reference(t + h));
+            let d = |x: Vector3<f64>, y: Vector3<f64>| (y - x) / (2.0 * h);
+            assert!((d(a.p_m, b.p_m) - r.v_m_s).norm() < 1e-6, "v at {t}");
+            assert!((d(a.v_m_s, b.v_m_s) - r.a_m_s2).norm() < 1e-5, "a at {t}");
+            assert!((d(a.a_m_s2, b.a_m_s2) - r.j_m_s3).norm() < 1e-4, "j at {t}");
+            assert_eq!(r.p_m.z, 1.0);
+            xmax = xmax.max(r.p_m.x.abs());
+            ymax = ymax.max(r.p_m.y.abs());
+        }
+        assert!(
+            (xmax - 0.5).abs() < 1e-3 && (ymax - 0.25).abs() < 1e-3,
+            "{xmax} {ymax}"
+        );
+        let bad =
+            "duration_s = 1.0\n[trajectory]\nkind = \"figure_eight\"\nstart_m = [0.0, 0.0, 1.0]\n\
+                   half_width_m = 0.5\nduration_s = 10.0\nstart_s = -1.0\n";
+        let e = Scenario::from_toml_str(bad, "test", "fig8").unwrap_err();
+        assert!(format!("{e:#}").contains("start_s"), "{e:#}");
+    }
 }

@@ -94,6 +94,21 @@ pub(super) fn validate(s: &ScenarioSpec) -> Result<()> {
                 bail!("key `trajectory.hold_s`: expected a number ≥ 0, got {hold_s}");
             }
         }
+        Trajectory::FigureEight {
+            start_m,
+            half_width_m,
+            duration_s,
+            start_s,
+        } => {
+            if !finite_all(start_m) {
+                bail!("key `trajectory.start_m`: expected three finite numbers");
+            }
+            pos("half_width_m", *half_width_m)?;
+            pos("duration_s", *duration_s)?;
+            if !(start_s.is_finite() && *start_s >= 0.0) {
+                bail!("key `trajectory.start_s`: expected a number ≥ 0, got {start_s}");
+            }
+        }
     }
     let d = &s.disturbance;
     if !finite_all(&d.wind_m_s2) {
