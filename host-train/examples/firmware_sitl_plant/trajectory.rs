@@ -15,7 +15,7 @@ use host_train::io::{
     crtp_mem_count_request, crtp_mem_info_request, crtp_mem_write_packets,
     hl_define_trajectory_packet, Poly4d, CRTP_MEM_TYPE_TRAJ, POLY4D_BYTES, TRAJECTORY_MEMORY_BYTES,
 };
-use nalgebra::{Matrix4, Vector4};
+use nalgebra::{Matrix4, Vector3, Vector4};
 
 use crate::crtp::FromFirmware;
 
@@ -29,47 +29,14 @@ const IN_FLIGHT: usize = 4;
 pub const HL_CMD_START_TRAJECTORY: u8 = 5;
 const HL_CMD_DEFINE_TRAJECTORY: u8 = 6;
 
-/// The septic smoothstep 0 → 1 over [0, 1] with zero velocity, acceleration and jerk at both
-/// ends, and its first three derivatives.
-fn septic(u: f64) -> [f64; 4] {
-    let u = u.clamp(0.0, 1.0);
-    let (u2, u3, u4) = (u * u, u * u * u, u * u * u * u);
-    [
-        u4 * (35.0 - 84.0 * u + 70.0 * u2 - 20.0 * u3),
-        u3 * (140.0 - 420.0 * u + 420.0 * u2 - 140.0 * u3),
-        u2 * (420.0 - 1680.0 * u + 2100.0 * u2 - 840.0 * u3),
-        u * (840.0 - 5040.0 * u + 8400.0 * u2 - 4200.0 * u3),
-    ]
-}
-
-/// The figure of eight at `t_s` of `dur_s`: x = a sin θ, y = (a/2) sin 2θ, z = 0, with θ going
-/// 0 → 2π along the septic smoothstep (at rest, without acceleration or jerk, at both ends, which
-/// are the start point, the origin). Per axis: position and its first three time derivatives.
+/// The figure of eight at `t_s` of `dur_s` (the scenarios' `kind = "figure_eight"`): x = a sin θ,
+/// y = (a/2) sin 2θ, z = 0, with θ going 0 → 2π along the septic smoothstep (at rest, without
+/// acceleration or jerk, at both ends, which are the start point, the origin). Per axis: position
+/// and its first three time derivatives.
 pub fn figure_eight(a_m: f64, dur_s: f64, t_s: f64) -> [[f64; 4]; 3] {
-    let tau = core::f64::consts::TAU;
-    let s = septic(t_s / dur_s);
-    // θ and its derivatives in time
-    let th = [
-        tau * s[0],
-        tau * s[1] / dur_s,
-        tau * s[2] / dur_s.powi(2),
-        tau * s[3] / dur_s.powi(3),
-    ];
-    // f(θ) and its derivatives in θ, then the chain rule to the third derivative in time
-    let chain = |f: [f64; 4]| {
-        [
-            f[0],
-            f[1] * th[1],
-            f[2] * th[1] * th[1] + f[1] * th[2],
-            f[3] * th[1].powi(3) + 3.0 * f[2] * th[1] * th[2] + f[1] * th[3],
-        ]
-    };
-    let (sn, cs) = th[0].sin_cos();
-    let (s2, c2) = (2.0 * th[0]).sin_cos();
-    let x = chain([a_m * sn, a_m * cs, -a_m * sn, -a_m * cs]);
-    let b = a_m / 2.0;
-    let y = chain([b * s2, 2.0 * b * c2, -4.0 * b * s2, -8.0 * b * c2]);
-    [x, y, [0.0; 4]]
+    let p = host_train::sim::figure_eight(Vector3::zeros(), a_m, dur_s, t_s);
+    let axis = |i: usize| [p.p_m[i], p.v_m_s[i], p.a_m_s2[i], p.j_m_s3[i]];
+    [axis(0), axis(1), axis(2)]
 }
 
 /// The degree-7 polynomial on [0, d] (ascending coefficients) with value and first three
