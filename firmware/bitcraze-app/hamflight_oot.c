@@ -15,7 +15,9 @@
  *     the composite adaptation law's force rows use it (hamflight.law = 1, the default); the
  *     paper's gradient law does not read it.
  *   - setpoint, per axis x, y, z (setpoint->mode.x/y/z):
- *       modeAbs      p* = position, with velocity, acceleration and jerk as feedforward;
+ *       modeAbs      p* = position, with velocity, acceleration and jerk as feedforward (a
+ *                    setpoint without jerk but with desired body rates, as a full-state one:
+ *                    the jerk rebuilt from them, see setpointJerk);
  *       modeVelocity the velocity is integrated into p* (the cfclient joystick, cflib velocity
  *                    and hover commands), p* kept within `hamflight.leash` m of the estimate
  *                    so that it cannot run away from a vehicle that cannot follow; velocity is
@@ -589,6 +591,58 @@ static HF_NOINLINE void convertState(const state_t *state, const sensorData_t *s
 
 static float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+/* The feed-forward jerk (world, m/s^3) of a setpoint, used on its modeAbs axes:
+ *   - setpoint->jerk when it is not zero (Bitcraze's high-level commander fills it);
+ *   - else, when x, y and z are all modeAbs and roll and pitch are modeDisable, the jerk rebuilt
+ *     from the desired body rates attitudeRate.roll/pitch (deg/s) the setpoint carries as
+ *     feed-forward: a full-state setpoint (cflib's send_full_state_setpoint, Crazyswarm's
+ *     cmdFullState; crtp_commander_generic.c's fullStateDecoder sets the jerk to 0) and the
+ *     high-level commander both send them. (With roll/pitch in modeVelocity they are a manual
+ *     rate command, which this controller does not follow.) They are the flatness rates of
+ *     pptraj.c's poly4d_eval (and Crazyswarm's uav_trajectory): z_b along t = a + g e3,
+ *     y_b = z_b x (cos yaw, sin yaw, 0) normalised, x_b = y_b x z_b, h = the jerk's part across
+ *     z_b over |t|, w_x = -h.y_b, w_y = h.x_b. The desired attitude's rate needs only that part:
+ *     j = |t| (w_y x_b - w_x y_b). yaw is the shim's yaw reference (attitude.yaw, or the yaw of
+ *     a full-state setpoint's quaternion);
+ *   - zero rates (position, velocity and hover setpoints, a full-state setpoint without rates)
+ *     give zero. */
+static void setpointJerk(const setpoint_t *sp, const float acc[3], float yaw, float jerk[3]) {
+  const float given[3] = {sp->jerk.x, sp->jerk.y, sp->jerk.z};
+  for (int i = 0; i < 3; i++) {
+    jerk[i] = given[i];
+  }
+  if (given[0] != 0.0f || given[1] != 0.0f || given[2] != 0.0f) {
+    return;
+  }
+  if (sp->mode.x != modeAbs || sp->mode.y != modeAbs || sp->mode.z != modeAbs ||
+      sp->mode.roll != modeDisable || sp->mode.pitch != modeDisable) {
+    return;
+  }
+  const float wx = sp->attitudeRate.roll * HF_DEG_TO_RAD;
+  const float wy = sp->attitudeRate.pitch * HF_DEG_TO_RAD;
+  const float t[3] = {acc[0], acc[1], acc[2] + HF_G_M_S2}; /* pptraj.h's GRAV */
+  const float tn = sqrtf(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+  if (!(tn > 1e-3f) || (wx == 0.0f && wy == 0.0f)) {
+    return;
+  }
+  const float zb[3] = {t[0] / tn, t[1] / tn, t[2] / tn};
+  const float xw[3] = {cosf(yaw), sinf(yaw), 0.0f};
+  float yb[3] = {zb[1] * xw[2] - zb[2] * xw[1], zb[2] * xw[0] - zb[0] * xw[2],
+                 zb[0] * xw[1] - zb[1] * xw[0]};
+  const float yn = sqrtf(yb[0] * yb[0] + yb[1] * yb[1] + yb[2] * yb[2]);
+  if (!(yn > 1e-6f)) {
+    return; /* thrust along the heading: no body frame */
+  }
+  for (int i = 0; i < 3; i++) {
+    yb[i] /= yn;
+  }
+  const float xb[3] = {yb[1] * zb[2] - yb[2] * zb[1], yb[2] * zb[0] - yb[0] * zb[2],
+                       yb[0] * zb[1] - yb[1] * zb[0]};
+  for (int i = 0; i < 3; i++) {
+    jerk[i] = tn * (wy * xb[i] - wx * yb[i]);
+  }
+}
+
 static HF_NOINLINE void convertSetpoint(const setpoint_t *sp, const hf_state_t *s, hf_setpoint_t *out) {
   /* Yaw. */
   float yawRate = 0.0f;
@@ -611,7 +665,8 @@ static HF_NOINLINE void convertSetpoint(const setpoint_t *sp, const hf_state_t *
   const stab_mode_t mode[3] = {sp->mode.x, sp->mode.y, sp->mode.z};
   const float pos[3] = {sp->position.x, sp->position.y, sp->position.z};
   const float acc[3] = {sp->acceleration.x, sp->acceleration.y, sp->acceleration.z};
-  const float jerk[3] = {sp->jerk.x, sp->jerk.y, sp->jerk.z};
+  float jerk[3];
+  setpointJerk(sp, acc, refYaw, jerk);
   float vel[3] = {sp->velocity.x, sp->velocity.y, sp->velocity.z};
   if (sp->velocity_body) {
     const float psi = yawOfRot(s->rot);

@@ -208,6 +208,23 @@ void hf_host_set_setpoint(const int modes[4], const float p[3], const float v[3]
   setpoint.velocity_body = velocity_body;
 }
 
+/* The attitude part of the setpoint hf_host_set_setpoint made (call it after that one): the
+ * modes of roll, pitch and the quaternion (0 disable, 1 abs, 2 velocity), the body rates roll
+ * and pitch (deg/s; the yaw rate is hf_host_set_setpoint's) and the quaternion (x, y, z, w), as
+ * crtp_commander_generic.c's full-state decoder and the high-level commander fill them. */
+void hf_host_set_setpoint_attitude(const int modes_rpq[3], float roll_rate_deg_s,
+                                   float pitch_rate_deg_s, const float q_xyzw[4]) {
+  setpoint.mode.roll = (stab_mode_t)modes_rpq[0];
+  setpoint.mode.pitch = (stab_mode_t)modes_rpq[1];
+  setpoint.mode.quat = (stab_mode_t)modes_rpq[2];
+  setpoint.attitudeRate.roll = roll_rate_deg_s;
+  setpoint.attitudeRate.pitch = pitch_rate_deg_s;
+  setpoint.attitudeQuaternion.x = q_xyzw[0];
+  setpoint.attitudeQuaternion.y = q_xyzw[1];
+  setpoint.attitudeQuaternion.z = q_xyzw[2];
+  setpoint.attitudeQuaternion.w = q_xyzw[3];
+}
+
 /* The commander's null setpoint (no setpoint for too long, or a stop). */
 void hf_host_set_null_setpoint(void) { memset(&setpoint, 0, sizeof(setpoint)); }
 

@@ -111,7 +111,8 @@ struct Args {
     #[arg(long)]
     stock_mixer: bool,
     /// The setpoint cflib streams: `full-state` (`send_full_state_setpoint`: the reference's
-    /// position, velocity, acceleration, yaw and yaw rate) or `position`
+    /// position, velocity, acceleration, yaw and yaw rate), `full-state-rates` (the same with
+    /// the body rates of the reference's jerk, as Crazyswarm sends them) or `position`
     /// (`send_position_setpoint`: position and yaw only, no feed-forward).
     #[arg(long, value_enum, default_value_t = SetpointKind::FullState)]
     setpoint: SetpointKind,
@@ -214,6 +215,10 @@ pub enum Pilot {
 pub enum SetpointKind {
     /// Generic commander type 6: position, velocity and acceleration, attitude, rates.
     FullState,
+    /// Type 6 with the reference's body rates from its acceleration, jerk and yaw rate
+    /// (`flatness_body_rates`, as Crazyswarm's `cmdFullState` sends them); the jerk itself
+    /// cannot be sent.
+    FullStateRates,
     /// Generic commander type 7: position and yaw.
     Position,
 }

@@ -3,9 +3,9 @@
 
 use anyhow::{bail, Context, Result};
 use host_train::io::{
-    full_state_setpoint_packet, hl_go_to_packet, hl_land_packet, hl_start_trajectory_packet,
-    hl_stop_packet, hl_takeoff_packet, poly4d_trajectory_eval, position_setpoint_packet,
-    stop_setpoint_packet, Poly4d,
+    flatness_body_rates, full_state_setpoint_packet, full_state_setpoint_packet_with_rates,
+    hl_go_to_packet, hl_land_packet, hl_start_trajectory_packet, hl_stop_packet, hl_takeoff_packet,
+    poly4d_trajectory_eval, position_setpoint_packet, stop_setpoint_packet, Poly4d,
 };
 use host_train::TrajectoryPoint;
 use nalgebra::Vector3;
@@ -242,6 +242,18 @@ impl Piloting {
                             &sp.a_m_s2,
                             sp.yaw_rad,
                             sp.yaw_rate_rad_s,
+                        ),
+                        SetpointKind::FullStateRates => full_state_setpoint_packet_with_rates(
+                            &sp.p_m,
+                            &sp.v_m_s,
+                            &sp.a_m_s2,
+                            sp.yaw_rad,
+                            &flatness_body_rates(
+                                &sp.a_m_s2,
+                                &sp.j_m_s3,
+                                sp.yaw_rad,
+                                sp.yaw_rate_rad_s,
+                            ),
                         ),
                         SetpointKind::Position => {
                             position_setpoint_packet(&sp.p_m, sp.yaw_rad.to_degrees())

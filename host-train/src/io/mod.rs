@@ -11,7 +11,8 @@
 //! [`parse_usd`] (`usdlog::parse`), [`ParseOptions`], [`UsdError`], [`UsdWriter`], [`Var`],
 //! [`VarType`], [`EventType`], [`crc32`], [`FIXED_FREQUENCY_ID`], [`LEE_COMMAND_VARS`],
 //! [`USD_STATE_VARS`], [`USD_ACC_VARS`]; the firmware link's packets ([`imu_packet`], [`parse_motor`],
-//! [`full_state_setpoint_packet`], [`CrtpSetpoint`], ...: the list below), and its lock-step
+//! [`full_state_setpoint_packet`], [`flatness_body_rates`], [`CrtpSetpoint`], ...: the list
+//! below), and its lock-step
 //! ([`CrtpLockstep`], [`CrtpTick`], [`parse_tick_done`], [`crtp_await_handshake`]); the
 //! high-level commander's uploaded trajectories ([`Poly4d`], [`poly4d_trajectory_eval`],
 //! [`crtp_mem_write_packets`], [`parse_crtp_mem_answer`], [`hl_define_trajectory_packet`],
@@ -29,14 +30,14 @@ pub use crtp::{
     Lockstep as CrtpLockstep, Tick as CrtpTick, CH_SIM_TICK_DONE as CRTP_CH_SIM_TICK_DONE,
 };
 pub use crtp::{
-    ext_pose_packet, force_to_pwm, full_state_setpoint_packet, header as crtp_header,
-    hl_go_to_packet, hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet,
-    param_toc_request, param_write_float, param_write_u8, parse_ext_pose, parse_imu, parse_motor,
-    parse_param_answer, parse_setpoint, port_channel as crtp_port_channel,
-    position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress, quat_decompress,
-    stop_setpoint_packet, ParamAnswer, Setpoint as CrtpSetpoint, DEG_PER_LSB as IMU_DEG_PER_LSB,
-    G_PER_LSB as IMU_G_PER_LSB, HANDSHAKE as CRTP_HANDSHAKE,
-    PORT_COMMANDER_GENERIC as CRTP_PORT_COMMANDER_GENERIC,
+    ext_pose_packet, flatness_body_rates, force_to_pwm, full_state_setpoint_packet,
+    full_state_setpoint_packet_with_rates, header as crtp_header, hl_go_to_packet, hl_land_packet,
+    hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet, param_toc_request,
+    param_write_float, param_write_u8, parse_ext_pose, parse_imu, parse_motor, parse_param_answer,
+    parse_setpoint, port_channel as crtp_port_channel, position_setpoint_packet, pwm_to_force_n,
+    pwm_to_rpm, quat_compress, quat_decompress, stop_setpoint_packet, ParamAnswer,
+    Setpoint as CrtpSetpoint, DEG_PER_LSB as IMU_DEG_PER_LSB, G_PER_LSB as IMU_G_PER_LSB,
+    HANDSHAKE as CRTP_HANDSHAKE, PORT_COMMANDER_GENERIC as CRTP_PORT_COMMANDER_GENERIC,
     PORT_LOCALIZATION as CRTP_PORT_LOCALIZATION, PORT_PARAM as CRTP_PORT_PARAM,
     PORT_SETPOINT_HL as CRTP_PORT_SETPOINT_HL, PORT_SIM as CRTP_PORT_SIM,
 };

@@ -27,6 +27,12 @@ extern "C" {
         thrust: f32,
         velocity_body: bool,
     );
+    pub(crate) fn hf_host_set_setpoint_attitude(
+        modes_rpq: *const c_int,
+        roll_rate_deg_s: f32,
+        pitch_rate_deg_s: f32,
+        q_xyzw: *const f32,
+    );
     pub(crate) fn hf_host_set_null_setpoint();
     pub(crate) fn hf_host_tick(tick: u32, wrench: *mut f32) -> c_int;
     pub(crate) fn hf_host_find(

@@ -455,5 +455,6 @@ fn fly_shim(
 
 mod ffi;
 mod flight;
+mod jerk;
 mod native;
 mod upload;

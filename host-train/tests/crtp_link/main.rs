@@ -13,12 +13,13 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use host_train::io::{
-    crtp_await_handshake, crtp_header, ext_pose_packet, force_to_pwm, full_state_setpoint_packet,
-    hl_go_to_packet, hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet,
-    param_toc_request, param_write_float, parse_ext_pose, parse_imu, parse_motor,
-    parse_param_answer, parse_setpoint, parse_tick_done, position_setpoint_packet, pwm_to_force_n,
-    pwm_to_rpm, quat_compress, stop_setpoint_packet, tick_done_packet, CrtpLockstep, CrtpSetpoint,
-    ParamAnswer, CRTP_HANDSHAKE, CRTP_PORT_PARAM,
+    crtp_await_handshake, crtp_header, ext_pose_packet, flatness_body_rates, force_to_pwm,
+    full_state_setpoint_packet, full_state_setpoint_packet_with_rates, hl_go_to_packet,
+    hl_land_packet, hl_stop_packet, hl_takeoff_packet, imu_packet, motor_packet, param_toc_request,
+    param_write_float, parse_ext_pose, parse_imu, parse_motor, parse_param_answer, parse_setpoint,
+    parse_tick_done, position_setpoint_packet, pwm_to_force_n, pwm_to_rpm, quat_compress,
+    stop_setpoint_packet, tick_done_packet, CrtpLockstep, CrtpSetpoint, ParamAnswer,
+    CRTP_HANDSHAKE, CRTP_PORT_PARAM,
 };
 use host_train::io::{
     crtp_mem_count_request, crtp_mem_info_request, crtp_mem_read_request, crtp_mem_write_packet,

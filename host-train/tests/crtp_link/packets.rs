@@ -50,6 +50,35 @@ fn packets_have_the_firmwares_byte_layouts() {
     // Identity: w (index 3) largest, the other three zero.
     assert_eq!(&fs[20..24], &(3u32 << 30).to_le_bytes());
     assert_eq!(&fs[28..30], &500i16.to_le_bytes());
+    // With all three body rates (mrad/s, roll pitch yaw): decoded back as sent.
+    let fs = full_state_setpoint_packet_with_rates(
+        &Vector3::zeros(),
+        &Vector3::zeros(),
+        &Vector3::zeros(),
+        0.0,
+        &Vector3::new(1.25, -0.5, 0.5),
+    );
+    assert_eq!(fs.len(), 30);
+    assert_eq!(&fs[24..26], &1250i16.to_le_bytes());
+    assert_eq!(&fs[26..28], &(-500i16).to_le_bytes());
+    assert_eq!(&fs[28..30], &500i16.to_le_bytes());
+    // The flatness rates: level (a = 0), yaw 0, the body axes are the world's; a jerk across the
+    // thrust axis turns it at j / g (x: pitch up, y: roll the other way); along it, not at all;
+    // at yaw 90° the body x axis is the world's y.
+    let w = flatness_body_rates(
+        &Vector3::zeros(),
+        &Vector3::new(1.962, -0.981, 5.0),
+        0.0,
+        0.3,
+    );
+    assert!((w - Vector3::new(0.1, 0.2, 0.3)).norm() < 1e-12, "{w}");
+    let w = flatness_body_rates(
+        &Vector3::zeros(),
+        &Vector3::new(0.0, 1.962, 0.0),
+        std::f64::consts::FRAC_PI_2,
+        0.0,
+    );
+    assert!((w - Vector3::new(0.0, 0.2, 0.0)).norm() < 1e-12, "{w}");
     // A yaw of 90 deg: w = z = 0.7071; the first largest (z, index 2) is sent, w as 511.
     let s = std::f64::consts::FRAC_1_SQRT_2;
     assert_eq!(quat_compress([0.0, 0.0, s, s]), (2 << 30) | 511);

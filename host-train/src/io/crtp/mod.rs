@@ -161,6 +161,19 @@ pub fn full_state_setpoint_packet(
     yaw_rad: f64,
     yaw_rate_rad_s: f64,
 ) -> Vec<u8> {
+    let rates = Vector3::new(0.0, 0.0, yaw_rate_rad_s);
+    full_state_setpoint_packet_with_rates(p_m, v_m_s, a_m_s2, yaw_rad, &rates)
+}
+
+/// [`full_state_setpoint_packet`] with all three body rates (rad/s, body: roll, pitch, yaw), as
+/// Crazyswarm's `cmdFullState` sends a trajectory's ([`flatness_body_rates`]).
+pub fn full_state_setpoint_packet_with_rates(
+    p_m: &Vector3<f64>,
+    v_m_s: &Vector3<f64>,
+    a_m_s2: &Vector3<f64>,
+    yaw_rad: f64,
+    rates_rad_s: &Vector3<f64>,
+) -> Vec<u8> {
     let milli = |x: f64| (x * 1000.0).round().clamp(-32768.0, 32767.0) as i16;
     let mut pk = vec![header(PORT_COMMANDER_GENERIC, 0), SETPOINT_FULL_STATE];
     for v in [p_m, v_m_s, a_m_s2] {
@@ -170,10 +183,30 @@ pub fn full_state_setpoint_packet(
     }
     let (s, c) = (0.5 * yaw_rad).sin_cos();
     pk.extend_from_slice(&quat_compress([0.0, 0.0, s, c]).to_le_bytes());
-    for r in [0.0, 0.0, yaw_rate_rad_s] {
-        pk.extend_from_slice(&milli(r).to_le_bytes());
+    for r in rates_rad_s.iter() {
+        pk.extend_from_slice(&milli(*r).to_le_bytes());
     }
     pk
+}
+
+/// The body rates (rad/s, body) of a trajectory with acceleration `a_m_s2`, jerk `j_m_s3`, yaw
+/// and yaw rate, as the firmware's high-level commander (`pptraj.c`'s `poly4d_eval`) and
+/// Crazyswarm's `uav_trajectory` compute them: z_b along t = a + g e3 (g = 9.81, pptraj's GRAV),
+/// y_b = z_b × (cos ψ, sin ψ, 0) normalised, x_b = y_b × z_b, h = the jerk's part across z_b over
+/// |t|; ω = (−h·y_b, h·x_b, z_b,z ψ̇).
+pub fn flatness_body_rates(
+    a_m_s2: &Vector3<f64>,
+    j_m_s3: &Vector3<f64>,
+    yaw_rad: f64,
+    yaw_rate_rad_s: f64,
+) -> Vector3<f64> {
+    let thrust = a_m_s2 + Vector3::z() * 9.81;
+    let z_b = thrust.normalize();
+    let x_c = Vector3::new(yaw_rad.cos(), yaw_rad.sin(), 0.0);
+    let y_b = z_b.cross(&x_c).normalize();
+    let x_b = y_b.cross(&z_b);
+    let h = (j_m_s3 - z_b * j_m_s3.dot(&z_b)) / thrust.norm();
+    Vector3::new(-h.dot(&y_b), h.dot(&x_b), z_b.z * yaw_rate_rad_s)
 }
 
 /// The stop setpoint (generic commander type 0): the motors stop.
