@@ -38,6 +38,7 @@ use host_train::ControllerSpec;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+mod compare;
 mod studies;
 use studies::{
     bitcraze_loop_table, bitcraze_summary_table, bitcraze_truth_table, vehicles_summary_table,
@@ -515,7 +516,7 @@ fn main() -> anyhow::Result<()> {
                     let Some(code_block) = blocks.get(name.as_str()) else {
                         continue;
                     };
-                    if page_block != code_block {
+                    if !compare::same_block(name, page_block, code_block) {
                         stale.push(format!(
                             "{page}, block `{name}`: {}",
                             first_difference(page_block, code_block)
