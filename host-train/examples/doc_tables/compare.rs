@@ -1,8 +1,11 @@
 //! Whether a page's generated block still says what the code gives.
 
-/// The firmware-budget columns whose figures move with the build's code layout (the checkout's
-/// path, in panic messages, shifts what lies in flash): the step's instruction counts and their
-/// time. They vary by a few instructions between checkouts of the same commit.
+/// The firmware-budget columns whose figures are quantized by the bench's clock: `report.sh`
+/// times each step with the SysTick at 168 MHz while QEMU's `-icount shift=0` runs one
+/// instruction per ns, so one tick is 5.95 instructions. Where the tick boundaries fall depends on
+/// how long the boot took, which moves with the code layout (the checkout's path, in panic
+/// messages), so the worst and least steps read one tick apart between checkouts of one commit;
+/// the traced instruction counts are identical.
 const LAYOUT_JITTER_COLUMNS: [usize; 2] = [2, 3];
 /// How far a figure of those columns may move (relative) and still match the page.
 const LAYOUT_JITTER: f64 = 0.0025;
