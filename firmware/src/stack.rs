@@ -5,21 +5,15 @@
 /// Paints the whole stack below the current frame again (a margin below it), so that
 /// [`stack_peak`] afterwards measures from here on.
 pub fn repaint_whole() {
+    repaint_below(stack_end());
+}
+
+/// The stack's lowest address (cortex-m-rt's `_stack_end`).
+fn stack_end() -> usize {
     extern "C" {
         static _stack_end: u32;
     }
-    let lo = core::ptr::addr_of!(_stack_end) as usize;
-    let sp = cortex_m::register::msp::read() as usize;
-    // Leave a margin below the live frame of this function.
-    let top = sp.saturating_sub(64) & !3;
-    cortex_m::interrupt::free(|_| {
-        let mut p = lo;
-        while p < top {
-            // SAFETY: word-aligned, inside RAM below the live stack, with interrupts disabled.
-            unsafe { core::ptr::write_volatile(p as *mut u32, cortex_m_rt::STACK_PAINT_VALUE) };
-            p += 4;
-        }
-    });
+    core::ptr::addr_of!(_stack_end) as usize
 }
 
 /// Peak stack use and stack size (bytes): cortex-m-rt's `paint-stack` fills everything between
@@ -27,10 +21,9 @@ pub fn repaint_whole() {
 /// paint marks the deepest the stack has been.
 pub fn stack_peak() -> (u32, u32) {
     extern "C" {
-        static _stack_end: u32;
         static _stack_start: u32;
     }
-    let lo = core::ptr::addr_of!(_stack_end) as usize;
+    let lo = stack_end();
     let hi = core::ptr::addr_of!(_stack_start) as usize;
     let p = lowest_unpainted(lo, hi);
     ((hi - p) as u32, (hi - lo) as u32)
@@ -69,12 +62,11 @@ pub const PROBE_WINDOW_BYTES: u32 = 4096;
 /// what an earlier, deeper use left in the window, so read [`stack_peak`] first.
 #[inline(always)]
 pub fn measure_stack<R>(f: impl FnOnce() -> R) -> (R, u32) {
-    extern "C" {
-        static _stack_end: u32;
-    }
     let sp = cortex_m::register::msp::read() as usize;
-    let lo = core::ptr::addr_of!(_stack_end) as usize;
-    let bottom = sp.saturating_sub(PROBE_WINDOW_BYTES as usize).max(lo) & !3;
+    let bottom = sp
+        .saturating_sub(PROBE_WINDOW_BYTES as usize)
+        .max(stack_end())
+        & !3;
     repaint_below(bottom);
     let r = f();
     let used = sp.saturating_sub(lowest_unpainted(bottom, sp));
