@@ -26,6 +26,31 @@ pub fn qemu_available() -> bool {
         .unwrap_or(false)
 }
 
+/// Adds the thumbv7em-none-eabihf standard library when rustup lacks it, as `cargo fw-build`
+/// does (`firmware/tools/ensure-target.sh`): rustup installs rust-toolchain.toml's target only
+/// when it installs the toolchain itself, so on a machine that already had 1.95.0 the
+/// firmware build would fail with "can't find crate for `core`". Runs once per test binary.
+fn ensure_target(firmware_dir: &Path) {
+    static DONE: std::sync::OnceLock<()> = std::sync::OnceLock::new();
+    DONE.get_or_init(|| {
+        let script = firmware_dir.join("tools/ensure-target.sh");
+        let mut cmd = Command::new("bash");
+        cmd.arg(&script);
+        // The firmware's own rust-toolchain.toml must pick the toolchain, not the outer cargo's.
+        cmd.env_remove("RUSTUP_TOOLCHAIN");
+        let out = cmd
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
+        assert!(
+            out.status.success(),
+            "{} failed: the thumbv7em-none-eabihf target is missing and could not be added \
+             (rustup target add thumbv7em-none-eabihf):\n{}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    });
+}
+
 /// Serialises the firmware builds of the tests in this binary: they share the firmware's target
 /// directory, where each build overwrites the same `release/qemu`, and each copies its ELF away
 /// before the next starts.
@@ -39,6 +64,7 @@ pub fn build_firmware(features: &str, default_features: bool) -> PathBuf {
     let dir = repo().join("firmware");
     let target = dir.join("target");
     let _lock: MutexGuard<()> = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    ensure_target(&dir);
     let mut cmd = Command::new("cargo");
     cmd.current_dir(&dir).args([
         "build",
