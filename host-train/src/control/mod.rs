@@ -9,6 +9,7 @@
 pub mod adapter;
 pub mod baselines;
 pub mod controller;
+pub mod onboard;
 pub mod registry;
 pub mod spec;
 
