@@ -20,70 +20,10 @@ pub use config::{MellingerGains, OnboardConfig};
 pub use mellinger::{Mellinger, MellingerOutput};
 pub use power::{legacy_power_distribution, LegacyControl, PWM_MAX};
 
-use nalgebra::{UnitQuaternion, Vector3};
-
-/// The estimated state the onboard controller sees.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OnboardState {
-    /// Position, world, m.
-    pub p_m: Vector3<f64>,
-    /// Velocity, world, m/s.
-    pub v_m_s: Vector3<f64>,
-    /// Attitude, body (FLU) to world (z up).
-    pub q: UnitQuaternion<f64>,
-    /// Body angular rate (the gyro), rad/s.
-    pub w_body_rad_s: Vector3<f64>,
-}
-
-/// The full-state reference (the high-level commander's setpoint, position mode absolute).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OnboardSetpoint {
-    /// Reference position, world, m.
-    pub p_m: Vector3<f64>,
-    /// Reference velocity, world, m/s.
-    pub v_m_s: Vector3<f64>,
-    /// Reference acceleration (feedforward), world, m/s².
-    pub a_m_s2: Vector3<f64>,
-    /// Reference yaw, rad.
-    pub yaw_rad: f64,
-}
-
-impl OnboardSetpoint {
-    /// Hover at `p_m` with yaw `yaw_rad`.
-    pub fn hover(p_m: Vector3<f64>, yaw_rad: f64) -> Self {
-        Self {
-            p_m,
-            v_m_s: Vector3::zeros(),
-            a_m_s2: Vector3::zeros(),
-            yaw_rad,
-        }
-    }
-}
-
-/// Normalized motor commands 0..1 (PWM ratio / 65535), motors 1..4 in the benchmark's order.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
-pub struct MotorCommands(pub [f64; 4]);
-
-impl MotorCommands {
-    /// Collective: the mean of the four commands.
-    pub fn collective(&self) -> f64 {
-        self.0.iter().sum::<f64>() / 4.0
-    }
-
-    /// The legacy distribution's inverse: (collective, roll, pitch, yaw) in command units
-    /// (normalized), with roll = the firmware's `control.roll`, pitch = `control.pitch`,
-    /// yaw = `control.yaw` (each divided by 65535) when no motor is capped.
-    pub fn axes(&self) -> [f64; 4] {
-        let [m1, m2, m3, m4] = self.0;
-        // m1 = T - r + p + y, m2 = T - r - p - y, m3 = T + r - p + y, m4 = T + r + p - y,
-        // with r = roll / 2, p = pitch / 2.
-        let t = (m1 + m2 + m3 + m4) / 4.0;
-        let r = (-m1 - m2 + m3 + m4) / 4.0;
-        let p = (m1 - m2 - m3 + m4) / 4.0;
-        let y = (m1 - m2 + m3 - m4) / 4.0;
-        [t, 2.0 * r, 2.0 * p, y]
-    }
-}
+// The logged records (state, reference, commands) live with the log's reader in the io layer
+// (layer 1), so that reading a loop log needs no controller; they are the controller's
+// interface types too.
+pub use crate::io::{MotorCommands, OnboardSetpoint, OnboardState};
 
 /// An onboard control law stepping at its own rate: what the replay drives.
 pub trait OnboardLaw {
