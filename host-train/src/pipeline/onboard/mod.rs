@@ -123,6 +123,7 @@ fn read_split(dir: &Path) -> Result<Vec<(String, LoopFlight)>> {
 }
 
 /// R² of one flight's replay over its flown rows.
+#[allow(clippy::needless_range_loop)] // rows index four parallel columns
 pub fn flight_r2(f: &LoopFlight, cfg: &OnboardConfig, opt: &ReplayOptions) -> (FitAcc, usize) {
     let pred = replay(f, cfg, opt);
     let mut acc = FitAcc::default();
@@ -164,6 +165,7 @@ fn evaluate(
 }
 
 /// Runs the subcommand.
+#[allow(clippy::needless_range_loop)] // rows index four parallel columns
 pub fn run(args: &OnboardArgs) -> Result<OnboardReport> {
     if args.fit && args.out.is_none() {
         bail!("--fit needs --out FILE.json for the identified configuration");
