@@ -3,6 +3,8 @@
 //!
 //! Front door: code outside `host-train/src` imports these from here, never from a submodule
 //! (`tools/front-door.py` checks it): [`write_atomic`], [`write_json_atomic`]; [`FlightLog`];
+//! the loop logs' [`LoopFlight`], [`read_loop_csv`], [`read_loop_dir`] and the onboard records
+//! [`OnboardState`], [`OnboardSetpoint`], [`MotorCommands`];
 //! the dataset's [`Dataset`], [`Flight`], [`Realization`], [`RealizationMeta`], [`Sample`],
 //! [`VehicleDescription`], [`WindowSpec`], [`load_dataset`], [`load_dataset_manifest`],
 //! [`save_dataset`], [`dataset_windows`], [`sample_segments`], [`realization_file`],
