@@ -2,7 +2,7 @@
 //! Marquardt on the replayed axes (collective, roll, pitch, yaw) of the training flights, the
 //! Jacobian by finite differences of whole replays, and a grid over the command delay.
 
-use super::replay::{active, replay, ReplayOptions};
+use super::replay::{active, replay, smooth, ReplayOptions};
 use crate::control::onboard::OnboardConfig;
 use crate::io::LoopFlight;
 use nalgebra::{DMatrix, DVector};
@@ -56,9 +56,10 @@ impl Problem<'_> {
     fn residuals(&self, cfg: &OnboardConfig) -> DVector<f64> {
         let mut r = Vec::new();
         for (f, rows) in self.flights.iter().zip(&self.rows) {
-            let pred = replay(f, cfg, &self.opt);
+            let pred = smooth(f, &replay(f, cfg, &self.opt), self.opt.smooth_rows);
+            let log = smooth(f, &f.cmd, self.opt.smooth_rows);
             for &k in rows {
-                let (a, b) = (f.cmd[k].axes(), pred[k].axes());
+                let (a, b) = (log[k].axes(), pred[k].axes());
                 for i in 0..4 {
                     r.push((b[i] - a[i]) / self.scale[i]);
                 }

@@ -13,7 +13,7 @@ pub mod trust;
 use crate::control::onboard::OnboardConfig;
 use crate::io::{read_loop_csv, write_json_atomic, LoopFlight};
 use anyhow::{bail, Context, Result};
-use replay::{active, replay, AccelSource, ReplayOptions};
+use replay::{active, replay, smooth, AccelSource, ReplayOptions};
 use serde::Serialize;
 use stats::{FitAcc, R2Summary};
 use std::path::{Path, PathBuf};
@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 (tools/benchmark/nanodrone.py --loop-out DIR). Each row's state and reference drive the \
 controller, which keeps its integrators across rows and sub-steps at 500 Hz between them; \
 R² compares its motor commands with the logged m*_thrust on the flown rows (all four commands \
-above zero). --fit identifies mass_thrust, the attitude gains, the rate damping, the trims and \
+above zero, not all at the idle floor; the controller is reset on entering them). --fit identifies mass_thrust, the attitude gains, the rate damping, the trims and \
 a command delay on train/ only and reports test/ (melon) once with them.")]
 pub struct OnboardArgs {
     /// The loop-log folder (train/ and test/ subfolders, or CSVs directly).
@@ -53,6 +53,12 @@ pub struct OnboardArgs {
     /// Half-width of that central difference, rows.
     #[arg(long, default_value_t = 2)]
     pub accel_span: usize,
+    /// Compare the commands after a centred moving average over this many rows (both logged
+    /// and replayed; ≤ 1: raw). The logged roll and pitch commands are mostly white at 100 Hz
+    /// (lag-1 autocorrelation ≈ 0.4): the gyro noise the 500 Hz controller saw, which the
+    /// 100 Hz log's state does not carry; the average keeps the band the log can explain.
+    #[arg(long, default_value_t = 0)]
+    pub smooth: usize,
     /// Also write, per flight, DIR/<run>.csv with the logged and the replayed commands per row
     /// (outside the repository: it is derived from the benchmark's data).
     #[arg(long, value_name = "DIR")]
@@ -125,12 +131,13 @@ fn read_split(dir: &Path) -> Result<Vec<(String, LoopFlight)>> {
 /// R² of one flight's replay over its flown rows.
 #[allow(clippy::needless_range_loop)] // rows index four parallel columns
 pub fn flight_r2(f: &LoopFlight, cfg: &OnboardConfig, opt: &ReplayOptions) -> (FitAcc, usize) {
-    let pred = replay(f, cfg, opt);
+    let pred = smooth(f, &replay(f, cfg, opt), opt.smooth_rows);
+    let log = smooth(f, &f.cmd, opt.smooth_rows);
     let mut acc = FitAcc::default();
     let mut n = 0;
     for k in 0..f.len() {
         if active(f, k) {
-            acc.add(&f.cmd[k], &pred[k]);
+            acc.add(&log[k], &pred[k]);
             n += 1;
         }
     }
@@ -191,6 +198,7 @@ pub fn run(args: &OnboardArgs) -> Result<OnboardReport> {
         substeps,
         accel: args.accel,
         accel_span: args.accel_span,
+        smooth_rows: args.smooth,
     };
     let mut fit_result = None;
     let mut before = None;

@@ -25,12 +25,50 @@ pub struct ReplayOptions {
     pub accel: AccelSource,
     /// Half-width of the central difference, rows.
     pub accel_span: usize,
+    /// Compare the commands after a centred moving average over this many rows (≤ 1: raw);
+    /// both the logged and the replayed ones, over flown rows only.
+    #[serde(default)]
+    pub smooth_rows: usize,
 }
 
-/// Whether row `k` was flown by the controller: all four logged commands above zero (the
-/// motors are stopped, the commands 0, while disarmed).
+/// The centred moving average of `cmd` over `rows` rows, over flown rows only (≤ 1: a copy).
+pub fn smooth(f: &LoopFlight, cmd: &[MotorCommands], rows: usize) -> Vec<MotorCommands> {
+    if rows <= 1 {
+        return cmd.to_vec();
+    }
+    let half = rows / 2;
+    let n = cmd.len();
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half).min(n.saturating_sub(1)));
+            let mut sum = [0.0; 4];
+            let mut cnt = 0.0;
+            for j in a..=b {
+                if active(f, j) {
+                    for (s, c) in sum.iter_mut().zip(cmd[j].0) {
+                        *s += c;
+                    }
+                    cnt += 1.0;
+                }
+            }
+            if cnt > 0.0 {
+                MotorCommands(sum.map(|s| s / cnt))
+            } else {
+                cmd[k]
+            }
+        })
+        .collect()
+}
+
+/// A command above the benchmark's idle floor (10000/65535 = 0.15259) by a margin.
+pub const ABOVE_IDLE: f64 = 0.155;
+
+/// Whether row `k` was flown by the controller: all four logged commands above zero (they are
+/// 0 while disarmed) and not all four at the idle floor (armed on the ground).
 pub fn active(f: &LoopFlight, k: usize) -> bool {
-    f.cmd.get(k).is_some_and(|c| c.0.iter().all(|&m| m > 0.0))
+    f.cmd
+        .get(k)
+        .is_some_and(|c| c.0.iter().all(|&m| m > 0.0) && c.0.iter().any(|&m| m > ABOVE_IDLE))
 }
 
 /// The reference with the acceleration filled in.
