@@ -32,6 +32,7 @@ pub struct ReplayOptions {
 }
 
 /// The centred moving average of `cmd` over `rows` rows, over flown rows only (≤ 1: a copy).
+#[allow(clippy::needless_range_loop)] // rows index the flight and the commands together
 pub fn smooth(f: &LoopFlight, cmd: &[MotorCommands], rows: usize) -> Vec<MotorCommands> {
     if rows <= 1 {
         return cmd.to_vec();
