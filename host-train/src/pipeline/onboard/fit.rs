@@ -89,6 +89,54 @@ pub struct FitResult {
     pub iterations: usize,
 }
 
+/// Levenberg–Marquardt from `base` (parameters zero); the parameters, residuals, iterations.
+fn levenberg_marquardt(p: &Problem, base: &OnboardConfig) -> (DVector<f64>, DVector<f64>, usize) {
+    let np = FIT_PARAMS.len();
+    let mut th = DVector::<f64>::zeros(np);
+    let mut r = p.residuals(&apply(base, th.as_slice()));
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    for _ in 0..12 {
+        iterations += 1;
+        let h = 1e-3;
+        let mut jac = DMatrix::<f64>::zeros(r.len(), np);
+        for i in 0..np {
+            let mut t = th.clone();
+            t[i] += h;
+            let ri = p.residuals(&apply(base, t.as_slice()));
+            jac.set_column(i, &((ri - &r) / h));
+        }
+        let jtj = jac.transpose() * &jac;
+        let g = jac.transpose() * &r;
+        let mut improved = false;
+        for _ in 0..6 {
+            let mut a = jtj.clone();
+            for i in 0..np {
+                a[(i, i)] += lambda * (jtj[(i, i)] + 1e-9);
+            }
+            let Some(step) = a.lu().solve(&(-&g)) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let t = &th + step;
+            let rt = p.residuals(&apply(base, t.as_slice()));
+            if rt.norm_squared() < r.norm_squared() {
+                let gain = r.norm_squared() - rt.norm_squared();
+                th = t;
+                r = rt;
+                lambda = (lambda / 3.0).max(1e-7);
+                improved = gain > 1e-6 * r.norm_squared();
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (th, r, iterations)
+}
+
 /// Fits [`FIT_PARAMS`] and the delay on `flights` (the training flights) from `start`.
 pub fn fit(flights: &[LoopFlight], start: &OnboardConfig, opt: &ReplayOptions) -> FitResult {
     let rows: Vec<Vec<usize>> = flights
@@ -125,65 +173,28 @@ pub fn fit(flights: &[LoopFlight], start: &OnboardConfig, opt: &ReplayOptions) -
         r.norm_squared() / r.len().max(1) as f64
     };
 
-    // The delay: a grid of whole rows with the starting gains.
-    let mut best_delay = (start.cmd_delay_s, f64::INFINITY);
-    for d in 0..=4 {
-        let mut c = *start;
-        c.cmd_delay_s = d as f64 * 0.01;
-        let j = cost(&c);
-        if j < best_delay.1 {
-            best_delay = (c.cmd_delay_s, j);
-        }
-    }
-    let mut base = *start;
-    base.cmd_delay_s = best_delay.0;
     let cost_start = cost(start);
-
-    // Levenberg–Marquardt.
-    let np = FIT_PARAMS.len();
-    let mut th = DVector::<f64>::zeros(np);
-    let mut r = p.residuals(&apply(&base, th.as_slice()));
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    for _ in 0..12 {
-        iterations += 1;
-        let h = 1e-4;
-        let mut jac = DMatrix::<f64>::zeros(r.len(), np);
-        for i in 0..np {
-            let mut t = th.clone();
-            t[i] += h;
-            let ri = p.residuals(&apply(&base, t.as_slice()));
-            jac.set_column(i, &((ri - &r) / h));
-        }
-        let jtj = jac.transpose() * &jac;
-        let g = jac.transpose() * &r;
-        let mut improved = false;
-        for _ in 0..6 {
-            let mut a = jtj.clone();
-            for i in 0..np {
-                a[(i, i)] += lambda * (jtj[(i, i)] + 1e-9);
-            }
-            let Some(step) = a.lu().solve(&(-&g)) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let t = &th + step;
-            let rt = p.residuals(&apply(&base, t.as_slice()));
-            if rt.norm_squared() < r.norm_squared() {
-                let gain = r.norm_squared() - rt.norm_squared();
-                th = t;
-                r = rt;
-                lambda = (lambda / 3.0).max(1e-7);
-                improved = gain > 1e-6 * r.norm_squared();
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
+    // The finite differences need a smooth replay: the fit runs without the firmware's integer
+    // truncations (at most a count each), the result keeps the caller's setting.
+    let mut base = *start;
+    base.integer_outputs = false;
+    // The delay: a grid of whole rows, the gains fitted at each.
+    let mut best: Option<(f64, DVector<f64>, DVector<f64>, usize)> = None;
+    for d in 0..=3 {
+        base.cmd_delay_s = d as f64 * 0.01;
+        let (th, r, it) = levenberg_marquardt(&p, &base);
+        if best
+            .as_ref()
+            .is_none_or(|b| r.norm_squared() < b.2.norm_squared())
+        {
+            best = Some((base.cmd_delay_s, th, r, it));
         }
     }
-    let config = apply(&base, th.as_slice());
+    let (delay, th, r, iterations) =
+        best.unwrap_or_else(|| (0.0, DVector::zeros(FIT_PARAMS.len()), DVector::zeros(0), 0));
+    base.cmd_delay_s = delay;
+    let mut config = apply(&base, th.as_slice());
+    config.integer_outputs = start.integer_outputs;
     let values = [
         config.mass_thrust,
         config.gains.kr_xy,

@@ -312,3 +312,87 @@ pub fn table(r: &OnboardReport) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::onboard::{Mellinger, OnboardLaw};
+    use crate::io::{MotorCommands, OnboardSetpoint, OnboardState};
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    /// A synthetic loop log whose commands are the port's own (defaults, one step per row).
+    fn synthetic(cfg: &OnboardConfig) -> LoopFlight {
+        let mut law = Mellinger::new(*cfg);
+        let mut f = LoopFlight {
+            name: "synthetic".into(),
+            ..LoopFlight::default()
+        };
+        for k in 0..800 {
+            let t = k as f64 * 0.01;
+            let s = OnboardState {
+                p_m: Vector3::new(
+                    0.3 * (0.9 * t).sin(),
+                    0.2 * (1.3 * t).cos(),
+                    1.0 + 0.1 * t.sin(),
+                ),
+                v_m_s: Vector3::new(
+                    0.27 * (0.9 * t).cos(),
+                    -0.26 * (1.3 * t).sin(),
+                    0.1 * t.cos(),
+                ),
+                q: UnitQuaternion::from_euler_angles(
+                    0.05 * (2.0 * t).sin(),
+                    0.04 * (1.7 * t).cos(),
+                    0.1 * (0.5 * t).sin(),
+                ),
+                w_body_rad_s: Vector3::new(0.1 * (2.0 * t).cos(), -0.07 * (1.7 * t).sin(), 0.05),
+            };
+            let sp = OnboardSetpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0);
+            let c = law.step(&s, &sp, 0.01);
+            f.t_s.push(t);
+            f.state.push(s);
+            f.setpoint.push(sp);
+            f.cmd.push(MotorCommands(c.0));
+            f.erpm.push([0.0; 4]);
+            f.vbat_v.push(4.0);
+        }
+        f
+    }
+
+    #[test]
+    fn replay_reproduces_its_own_commands_and_the_fit_recovers_a_gain() {
+        let cfg = OnboardConfig::cf21bl_2025_09();
+        let f = synthetic(&cfg);
+        let opt = ReplayOptions {
+            substeps: 1,
+            accel: AccelSource::Zero,
+            accel_span: 1,
+            smooth_rows: 0,
+        };
+        let (acc, n) = flight_r2(&f, &cfg, &opt);
+        let s = acc.summary(n);
+        assert_eq!(n, 800);
+        assert!(
+            s.r2_collective > 0.999_999 && s.r2_roll > 0.999_999,
+            "{s:?}"
+        );
+        // Start the fit from a wrong mass_thrust and wrong attitude gains.
+        let mut start = cfg;
+        start.mass_thrust = 110_000.0;
+        start.gains.kr_xy = 50_000.0;
+        let r = fit::fit(std::slice::from_ref(&f), &start, &opt);
+        let rel = (r.config.mass_thrust - 132_000.0).abs() / 132_000.0;
+        assert!(rel < 0.01, "mass_thrust {}: {r:?}", r.config.mass_thrust);
+        assert!(
+            (r.config.gains.kr_xy - 70_000.0).abs() < 3_500.0,
+            "kr_xy {}",
+            r.config.gains.kr_xy
+        );
+        assert!(
+            r.cost_end < 1e-3 * r.cost_start,
+            "{} -> {}",
+            r.cost_start,
+            r.cost_end
+        );
+    }
+}
