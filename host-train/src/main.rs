@@ -39,6 +39,10 @@ enum Command {
     /// flies; `--hold-out TYPE` fits without a flight type and scores it (model selection on
     /// training flights).
     FitPort(host_train::pipeline::fit_port::FitPortArgs),
+    /// Replay our port of Bitcraze's Mellinger controller along logged closed-loop flights
+    /// (nanodrone.py --loop-out): R² of the logged motor commands per motor and axis, which
+    /// logged wrench columns can be trusted; --fit identifies gains, trims and a delay on train/.
+    Onboard(host_train::pipeline::onboard::OnboardArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
@@ -96,6 +100,10 @@ fn run(cli: Cli) -> Result<()> {
             println!("  blob alone     {}", at(&r.errors_blob));
             println!("  with response  {}", at(&r.errors_fitted));
             println!("wrote {} in {:.1} s", args.out.display(), r.elapsed_s);
+        }
+        Command::Onboard(args) => {
+            let r = host_train::pipeline::onboard::run(&args)?;
+            print!("{}", host_train::pipeline::onboard::table(&r));
         }
         Command::FitPort(args) => {
             let r = host_train::pipeline::fit_port::run(&args)?;

@@ -36,6 +36,16 @@ CSV columns (SI, one header line):
                                  benchmark's world-frame accelerometer column
                                  (which includes gravity: ~ +9.81 on z at
                                  hover) rotated by R^T.
+With --loop-out DIR, also a closed-loop log per run (DIR/train/<run>.csv,
+DIR/test/<run>.csv) for replaying the onboard Mellinger controller
+(`host-train onboard`): the state columns above (t_s..wz_rad_s, erpm1..4),
+then the reference ref_px_m,ref_py_m,ref_pz_m (x_r..z_r),
+ref_vx_m_s,ref_vy_m_s,ref_vz_m_s (vx_r..vz_r), ref_yaw_rad (yaw_r), the
+onboard controller's output cmd1..cmd4 (m1_thrust..m4_thrust, PWM/65535,
+0..1), vbat_v (Vbat) and, as they are, the logged wrench columns
+log_thrust, log_torque_roll, log_torque_pitch, log_torque_yaw (thrust,
+torque_roll, torque_pitch, torch_yaw). The default output is unchanged.
+
 Rows are written as they are: repeated states (dropped packets filled by
 nearest-neighbour resampling) are NOT removed; the importer detects them.
 
@@ -166,6 +176,27 @@ def convert(df):
     return out
 
 
+LOOP_REF = [("ref_px_m", "x_r"), ("ref_py_m", "y_r"), ("ref_pz_m", "z_r"),
+            ("ref_vx_m_s", "vx_r"), ("ref_vy_m_s", "vy_r"), ("ref_vz_m_s", "vz_r"),
+            ("ref_yaw_rad", "yaw_r")]
+
+
+def loop_log(c, df):
+    """The closed-loop log: the converted state (no accelerometer), the reference, the
+    onboard controller's motor commands and the battery voltage."""
+    out = c.drop(columns=["ax_m_s2", "ay_m_s2", "az_m_s2"]).copy()
+    for name, col in LOOP_REF:
+        out[name] = df[col].to_numpy(float)
+    for i in range(1, 5):
+        out[f"cmd{i}"] = df[f"m{i}_thrust"].to_numpy(float)
+    out["vbat_v"] = df["Vbat"].to_numpy(float)
+    # the logged wrench columns as they are (for the trust table of `host-train onboard`)
+    for name, col in [("log_thrust", "thrust"), ("log_torque_roll", "torque_roll"),
+                      ("log_torque_pitch", "torque_pitch"), ("log_torque_yaw", "torch_yaw")]:
+        out[name] = df[col].to_numpy(float)
+    return out
+
+
 def sanity(run, df, c):
     """One line of checks per run; returns a dict of the numbers."""
     dt = float(np.median(np.diff(c["t_s"])))
@@ -247,12 +278,17 @@ def main():
     ap.add_argument("--motor-tau-s", type=float, default=None,
                     help="motor time constant (command -> measured speed, analyze.py finds 0.0325) to write into "
                          "vehicle.toml; omitted by default, because the CSVs carry measured speeds that must not be lagged again")
+    ap.add_argument("--loop-out", default=None,
+                    help="also write closed-loop logs (state, reference, cmd1..4 = m*_thrust, vbat_v) "
+                         "for `host-train onboard` to this folder (train/ and test/, outside the repository)")
     args = ap.parse_args()
 
     out = os.path.abspath(args.out)
     here = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-    if out == here or out.startswith(here + os.sep):
-        sys.exit(f"refusing to write benchmark data inside the repository ({here}); pick another --out")
+    loop_out = os.path.abspath(args.loop_out) if args.loop_out else None
+    for d in [out] + ([loop_out] if loop_out else []):
+        if d == here or d.startswith(here + os.sep):
+            sys.exit(f"refusing to write benchmark data inside the repository ({here}); pick another folder than {d}")
 
     groups = [("train", TRAIN_RUNS), ("test", TEST_RUNS)]
     if args.with_corrupt:
@@ -265,6 +301,10 @@ def main():
             df = read_run(args, run)
             c = convert(df)
             c.to_csv(os.path.join(out, split, run + ".csv"), index=False, float_format="%.9g", na_rep="nan")
+            if loop_out:
+                os.makedirs(os.path.join(loop_out, split), exist_ok=True)
+                loop_log(c, df).to_csv(os.path.join(loop_out, split, run + ".csv"), index=False,
+                                       float_format="%.9g", na_rep="nan")
             reports.append((split, sanity(run, df, c)))
 
     tw = max(r["tw_max"] for s, r in reports if s != "excluded")

@@ -3,6 +3,8 @@
 //!
 //! Front door: code outside `host-train/src` imports these from here, never from a submodule
 //! (`tools/front-door.py` checks it): [`write_atomic`], [`write_json_atomic`]; [`FlightLog`];
+//! the loop logs' [`LoopFlight`], [`read_loop_csv`], [`read_loop_dir`] and the onboard records
+//! [`OnboardState`], [`OnboardSetpoint`], [`MotorCommands`];
 //! the dataset's [`Dataset`], [`Flight`], [`Realization`], [`RealizationMeta`], [`Sample`],
 //! [`VehicleDescription`], [`WindowSpec`], [`load_dataset`], [`load_dataset_manifest`],
 //! [`save_dataset`], [`dataset_windows`], [`sample_segments`], [`realization_file`],
@@ -22,6 +24,7 @@ pub mod crtp;
 pub mod dataset;
 pub mod files;
 pub mod flightlog;
+pub mod loop_log;
 pub mod usdlog;
 
 // The layer's front door: what code outside host-train/src uses, by these names.
@@ -62,6 +65,9 @@ pub use dataset::{
 };
 pub use files::{write_atomic, write_json_atomic};
 pub use flightlog::FlightLog;
+pub use loop_log::{
+    read_loop_csv, read_loop_dir, LoopFlight, MotorCommands, OnboardSetpoint, OnboardState,
+};
 pub use usdlog::{
     crc32, parse as parse_usd, EventType, ParseOptions, UsdError, UsdWriter, Var, VarType,
     FIXED_FREQUENCY_ID, LEE_COMMAND_VARS, USD_ACC_VARS, USD_STATE_VARS,

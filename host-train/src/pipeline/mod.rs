@@ -15,6 +15,7 @@ pub mod check;
 pub mod demo;
 pub mod fit_port;
 pub mod fit_response;
+pub mod onboard;
 pub mod prior_check;
 pub mod score;
 pub mod train;

@@ -14,6 +14,8 @@
 #[cfg(bitcraze)]
 mod ffi;
 #[cfg(bitcraze)]
+mod mellinger_ref;
+#[cfg(bitcraze)]
 mod study;
 
 use clap::Parser;
@@ -79,6 +81,12 @@ pub struct Args {
     /// which `tools/bitcraze-loop/doc-data.sh` regenerates.
     #[arg(long, value_name = "FILE")]
     pub scores: Option<PathBuf>,
+    /// Instead of flying: feed Bitcraze's Mellinger (the C) and hamflight's port
+    /// (host-train's control::onboard) the same synthetic inputs, 600 steps at 500 Hz, write
+    /// the inputs and the C's motor commands to FILE (the fixture
+    /// host-train/tests/data/mellinger_c_reference.csv) and print the largest difference.
+    #[arg(long, value_name = "FILE")]
+    pub mellinger_reference: Option<PathBuf>,
 }
 
 /// Where the controllers' position, velocity and attitude come from.
@@ -93,7 +101,17 @@ pub enum StateSource {
 
 #[cfg(bitcraze)]
 fn main() -> anyhow::Result<()> {
-    study::run(&Args::parse())
+    let args = Args::parse();
+    if let Some(path) = &args.mellinger_reference {
+        let worst = mellinger_ref::run(path)?;
+        println!(
+            "wrote {} ({} rows); largest |C - port| = {worst} PWM counts",
+            path.display(),
+            mellinger_ref::ROWS
+        );
+        return Ok(());
+    }
+    study::run(&args)
 }
 
 #[cfg(not(bitcraze))]
