@@ -16,6 +16,7 @@ pub mod demo;
 pub mod fit_port;
 pub mod fit_response;
 pub mod prior_check;
+pub mod robustness;
 pub mod score;
 pub mod train;
 pub mod vehicle_study;
