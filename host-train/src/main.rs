@@ -47,6 +47,9 @@ enum Command {
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
     BenchTrain(host_train::pipeline::bench::BenchArgs),
+    /// The robustness matrix (issue 51): plant rotor lag × blob motor lag × command delay ×
+    /// jitter, both laws; writes docs/data/robustness.json and prints a table.
+    Robustness(host_train::pipeline::robustness::RobustnessArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::fly::eval::EvalArgs),
     /// Fly a scenario with both adaptation laws (the paper's gradient law and the composite law)
@@ -169,6 +172,11 @@ fn run(cli: Cli) -> Result<()> {
                 args.out.display(),
                 r.elapsed_s
             );
+        }
+        Command::Robustness(args) => {
+            let r = host_train::pipeline::robustness::run(&args)?;
+            print!("{}", host_train::pipeline::robustness::table(&r));
+            eprintln!("wrote {} in {:.1} s", args.out.display(), r.elapsed_s);
         }
         Command::Score(args) => {
             let s = host_train::pipeline::score::run(&args)?;

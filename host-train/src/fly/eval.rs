@@ -380,6 +380,8 @@ fn fly_loop<S: Stage + ?Sized>(
         ..Default::default()
     };
     let mut last_rpm = [0.0; 4];
+    let mut line = DelayLine::new(scenario, clock.dt_phys);
+    let mut phys_step: u64 = 0;
     for k in 0..=clock.n_ticks {
         let t = clock.t(k);
         plant.set_t_s(t);
@@ -419,8 +421,11 @@ fn fly_loop<S: Stage + ?Sized>(
             }
             log.control_steps += 1;
         }
+        line.push(phys_step, act.rpm);
         for _ in 0..clock.nsub {
-            plant.step(act.rpm, clock.dt_phys);
+            let rpm = line.at(phys_step);
+            phys_step += 1;
+            plant.step(rpm, clock.dt_phys);
             stage.sampled(&plant);
         }
         if let Some(pb) = progress {
@@ -431,6 +436,66 @@ fn fly_loop<S: Stage + ?Sized>(
     }
     log.wall_s = wall0.elapsed().as_secs_f64();
     log
+}
+
+/// The added command delay and jitter of the scenario's effects (`command_delay_s`,
+/// `command_jitter_s`): commands queued with the physics step they reach the plant at; with
+/// neither, a pass-through (the command acts at once, as before).
+struct DelayLine {
+    delay_steps: u64,
+    jitter_steps: u64,
+    rng: ChaCha8Rng,
+    /// Pending commands (physics step they act from, rpm), in order.
+    queue: std::collections::VecDeque<(u64, [f64; 4])>,
+    /// The command acting now (the first one until any arrives: the plant starts trimmed).
+    current: Option<[f64; 4]>,
+    last_due: u64,
+}
+
+/// The jitter's random stream (independent of the noise streams).
+const JITTER_STREAM: u64 = 0x6a17_7e12_d31a_7000;
+
+impl DelayLine {
+    fn new(scenario: &Scenario, dt_phys: f64) -> Self {
+        let e = &scenario.spec.effects;
+        let steps = |s: f64| (s / dt_phys).round().max(0.0) as u64;
+        Self {
+            delay_steps: steps(e.command_delay_s),
+            jitter_steps: steps(e.command_jitter_s),
+            rng: ChaCha8Rng::seed_from_u64(scenario.spec.seed ^ JITTER_STREAM),
+            queue: std::collections::VecDeque::new(),
+            current: None,
+            last_due: 0,
+        }
+    }
+
+    /// The command given at physics step `now`.
+    fn push(&mut self, now: u64, rpm: [f64; 4]) {
+        use rand::Rng;
+        let jitter = if self.jitter_steps > 0 {
+            self.rng.gen_range(0..=self.jitter_steps)
+        } else {
+            0
+        };
+        let due = (now + self.delay_steps + jitter).max(self.last_due);
+        self.last_due = due;
+        if self.current.is_none() {
+            self.current = Some(rpm);
+        }
+        self.queue.push_back((due, rpm));
+    }
+
+    /// The command acting at physics step `now`.
+    fn at(&mut self, now: u64) -> [f64; 4] {
+        while let Some(&(due, rpm)) = self.queue.front() {
+            if due > now {
+                break;
+            }
+            self.current = Some(rpm);
+            self.queue.pop_front();
+        }
+        self.current.unwrap_or([0.0; 4])
+    }
 }
 
 /// Arguments of `host-train eval`.

@@ -39,6 +39,12 @@ pub struct Effects {
     pub ground_effect: bool,
     /// First-order motor time constant (s); 0 turns motor lag off (rotors follow the command).
     pub motor_tau_s: f64,
+    /// Added command delay (s) between the controller's output and the plant's input (the
+    /// loop's, [`crate::fly::eval`]; rounded to physics steps); 0 = none.
+    pub command_delay_s: f64,
+    /// Command jitter (s): each tick's command is further delayed by a seeded uniform draw in
+    /// [0, this] (never overtaking an earlier command); 0 = none.
+    pub command_jitter_s: f64,
     /// Measurement noise on the state given to the controller.
     pub noise: StateNoise,
     /// Extra dynamics measured on a real vehicle's flights ([`Residual`]); none by default.

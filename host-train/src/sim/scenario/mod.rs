@@ -47,6 +47,8 @@
 //! rotor_drag = false
 //! ground_effect = false
 //! motor_tau_s = 0.0              # first-order motor lag time constant (s), 0 = off
+//! command_delay_s = 0.0          # added delay controller → plant (s), physics steps, 0 = off
+//! command_jitter_s = 0.0         # + a seeded uniform [0, this] s per tick, 0 = off
 //! [effects.residual]             # optional: what a real vehicle's flights measured beyond
 //!                                # the rigid body (sim::plant::Residual; bl-real-*.toml)
 //! [effects.noise]                # measurement noise σ on the controller's state

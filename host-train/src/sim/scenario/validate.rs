@@ -155,6 +155,14 @@ pub(super) fn validate(s: &ScenarioSpec) -> Result<()> {
             e.motor_tau_s
         );
     }
+    for (key, v) in [
+        ("command_delay_s", e.command_delay_s),
+        ("command_jitter_s", e.command_jitter_s),
+    ] {
+        if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+            bail!("key `effects.{key}`: expected a delay in [0, 1] s, got {v}");
+        }
+    }
     if let Some(r) = &e.residual {
         let mut numbers = [r.thrust_gain, r.torque_lag_s, r.thrust_lag_s]
             .into_iter()
