@@ -47,7 +47,7 @@ enum Command {
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
     BenchTrain(host_train::pipeline::bench::BenchArgs),
-    /// The robustness matrix (issue 51): plant rotor lag × blob motor lag × command delay ×
+    /// The robustness matrix: plant rotor lag × blob motor lag × command delay ×
     /// jitter, both laws; writes docs/data/robustness.json and prints a table.
     Robustness(host_train::pipeline::robustness::RobustnessArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.

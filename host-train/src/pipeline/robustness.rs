@@ -1,4 +1,4 @@
-//! `host-train robustness`: the robustness matrix of issue 51: the plant's rotor lag × the
+//! `host-train robustness`: the robustness matrix: the plant's rotor lag × the
 //! blob's motor lag × an added command delay × a command jitter, both adaptation laws, on hover
 //! and calm-spiral; per cell the position RMSE, the largest motor oscillation, limit cycle and
 //! crash, and the delay margin. Writes a JSON report (atomically) and prints a table.
@@ -39,7 +39,7 @@ pub const SUSTAIN_WINDOWS: usize = 3;
 #[derive(Args, Debug, Clone)]
 #[command(
     about = "The robustness matrix: plant rotor lag × blob motor lag × command delay × jitter",
-    long_about = "Fly the matrix of issue 51: the plant's rotor lag (0/20/50/80 ms) × the blob's \
+    long_about = "Fly the robustness matrix: the plant's rotor lag (0/20/50/80 ms) × the blob's \
 motor lag (the lag the core's compensation assumes, overriding the blob's: 0/20/50/80 ms) × an \
 added command delay (0/4/8 ms, between the controller's output and the plant) × a seeded command \
 jitter (0/3/6 ms), for both adaptation laws (adaptive = composite, adaptive-gradient), on \
@@ -121,7 +121,7 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// The full matrix of issue 51.
+    /// The full matrix (every lag, delay and jitter).
     pub fn full() -> Self {
         Self {
             plant_lag_ms: vec![0.0, 20.0, 50.0, 80.0],
