@@ -48,7 +48,7 @@ enum Command {
     /// epoch.
     BenchTrain(host_train::pipeline::bench::BenchArgs),
     /// The robustness matrix: plant rotor lag × blob motor lag × command delay ×
-    /// jitter, both laws; writes docs/data/robustness.json and prints a table.
+    /// jitter, both laws; writes out/robustness.json and prints a table.
     Robustness(host_train::pipeline::robustness::RobustnessArgs),
     /// Fly a scenario with a controller; writes DIR/report.json, DIR/path.svg, DIR/error.svg.
     Eval(host_train::fly::eval::EvalArgs),

@@ -29,6 +29,7 @@ pub use check::{
 };
 pub use fit_response::load_response;
 pub use prior_check::{prior_of, run as run_prior_check, run_with_safety as run_safety_check};
+pub use robustness::{fly_cell as fly_robustness_cell, load_scenario as load_robustness_scenario};
 pub use score::{run as run_score, table as score_table, ScoreArgs};
 pub use train::{run as run_train, run_cli as run_train_cli};
 pub use vehicle_study::{

@@ -57,7 +57,7 @@ pub struct RobustnessArgs {
     #[arg(long, default_value = "scenarios")]
     pub scenarios: PathBuf,
     /// Output JSON file.
-    #[arg(long, default_value = "docs/data/robustness.json")]
+    #[arg(long, default_value = "out/robustness.json")]
     pub out: PathBuf,
     /// A subset: plant and blob lags 0 and 80 ms (matched and the worst mismatches), delay
     /// 0/8 ms, jitter 0/6 ms, hover only, 10 s flights, margin in 4 ms steps.
