@@ -59,7 +59,7 @@ pub struct OnboardArgs {
     /// 100 Hz log's state does not carry; the average keeps the band the log can explain.
     #[arg(long, default_value_t = 0)]
     pub smooth: usize,
-    /// Also write, per flight, DIR/<run>.csv with the logged and the replayed commands per row
+    /// Also write, per flight, `DIR/RUN.csv` with the logged and the replayed commands per row
     /// (outside the repository: it is derived from the benchmark's data).
     #[arg(long, value_name = "DIR")]
     pub dump: Option<PathBuf>,
