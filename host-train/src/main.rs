@@ -43,6 +43,11 @@ enum Command {
     /// (nanodrone.py --loop-out): R² of the logged motor commands per motor and axis, which
     /// logged wrench columns can be trusted; --fit identifies gains, trims and a delay on train/.
     Onboard(host_train::pipeline::onboard::OnboardArgs),
+    /// Closed-loop replay: fly candidate plants (scenario vehicles) under the reproduced onboard
+    /// controller along logged flights from the logged state; position and attitude RMSE over
+    /// 10/50/100/300-row windows and whole flights, figures; --fit identifies the torque gains
+    /// and flapping against that error on train/.
+    Replay(host_train::pipeline::replay::ReplayArgs),
     /// Time training epochs (forward, backward, Adam) at batch 128, 256 and the full 7,776
     /// windows, the sizes of the PyTorch comparison in docs/performance.md; prints seconds per
     /// epoch.
@@ -103,6 +108,9 @@ fn run(cli: Cli) -> Result<()> {
             println!("  blob alone     {}", at(&r.errors_blob));
             println!("  with response  {}", at(&r.errors_fitted));
             println!("wrote {} in {:.1} s", args.out.display(), r.elapsed_s);
+        }
+        Command::Replay(args) => {
+            host_train::pipeline::replay::run(&args)?;
         }
         Command::Onboard(args) => {
             let r = host_train::pipeline::onboard::run(&args)?;

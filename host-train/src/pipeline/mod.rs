@@ -17,6 +17,7 @@ pub mod fit_port;
 pub mod fit_response;
 pub mod onboard;
 pub mod prior_check;
+pub mod replay;
 pub mod robustness;
 pub mod score;
 pub mod train;

@@ -1,0 +1,320 @@
+//! Closed-loop replay: a candidate plant (any scenario's vehicle) flown by the onboard
+//! controller ([`crate::control::onboard`]) along a logged flight's reference, started from the
+//! logged state, and compared with what the vehicle flew. The controller is known, the reference
+//! is exogenous, so the plant that replays the logs best is the one the data pick (the indirect
+//! approach to closed-loop identification).
+
+use crate::control::onboard::{Mellinger, OnboardConfig, OnboardLaw};
+use crate::io::{LoopFlight, MotorCommands, OnboardSetpoint, OnboardState};
+use crate::pipeline::onboard::replay::{active, setpoints, ReplayOptions};
+use crate::sim::plant::PlantState;
+use crate::sim::scenario::Scenario;
+use anyhow::{bail, Result};
+use nalgebra::UnitQuaternion;
+use serde::{Deserialize, Serialize};
+
+/// Electrical rpm per mechanical rpm of the Crazyflie 2.1 Brushless motors (12 poles, 6 pairs).
+pub const ERPM_PER_RPM: f64 = 6.0;
+
+/// A logged row counts as airborne above this height (m): below it the vehicle may touch the
+/// floor, which no plant here models.
+pub const AIRBORNE_Z_M: f64 = 0.15;
+
+/// A replay whose position leaves the log by more than this (m) has diverged; its remaining
+/// steps count at this error (and at [`DIVERGED_ATT_RAD`]).
+pub const DIVERGED_POS_M: f64 = 1.0;
+
+/// The attitude error a diverged replay's remaining steps count at (rad).
+pub const DIVERGED_ATT_RAD: f64 = core::f64::consts::FRAC_PI_2;
+
+/// The motors' command → speed map, rpm² = `offset_rpm2` + `rpm2_per_cmd` · command, fitted by
+/// least squares on the flown rows' measured speeds (eRPM / 6).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RotorMap {
+    /// rpm² at zero command.
+    pub offset_rpm2: f64,
+    /// rpm² per unit of normalized command.
+    pub rpm2_per_cmd: f64,
+}
+
+impl RotorMap {
+    /// The least-squares map over the flown rows of `flights` with finite speeds.
+    ///
+    /// # Errors
+    /// Fewer than 100 usable samples, or commands with no spread.
+    pub fn fit(flights: &[&LoopFlight]) -> Result<Self> {
+        let (mut sx, mut sy, mut sxx, mut sxy, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for f in flights {
+            for k in 0..f.len() {
+                if !active(f, k) {
+                    continue;
+                }
+                for (x, e) in f.cmd[k].0.iter().zip(&f.erpm[k]) {
+                    let r = e / ERPM_PER_RPM;
+                    if r.is_finite() {
+                        let y = r * r;
+                        sx += x;
+                        sy += y;
+                        sxx += x * x;
+                        sxy += x * y;
+                        n += 1.0;
+                    }
+                }
+            }
+        }
+        let den = n * sxx - sx * sx;
+        if n < 100.0 || den.abs() < 1e-12 {
+            bail!("too few flown rows with measured rotor speeds to fit the command → speed map ({n} samples)");
+        }
+        let b = (n * sxy - sx * sy) / den;
+        Ok(Self {
+            offset_rpm2: (sy - b * sx) / n,
+            rpm2_per_cmd: b,
+        })
+    }
+
+    /// The rotor speeds (rpm) the commands ask for.
+    pub fn rpm(&self, c: &MotorCommands) -> [f64; 4] {
+        c.0.map(|x| (self.offset_rpm2 + self.rpm2_per_cmd * x).max(0.0).sqrt())
+    }
+}
+
+/// How the replay flies: the controller, the motor map, the reference options and the warm-up.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct ReplayConfig {
+    /// The onboard controller's configuration.
+    pub controller: OnboardConfig,
+    /// Commands to rotor speeds.
+    pub map: RotorMap,
+    /// Sub-steps per log row and the reference acceleration.
+    pub options: ReplayOptions,
+    /// Rows before a window's start over which the controller runs on the logged states, so its
+    /// integrators hold what the vehicle's did (0: start them at zero).
+    pub warmup_rows: usize,
+}
+
+/// Whether row `k` is flown and airborne.
+pub fn airborne(f: &LoopFlight, k: usize) -> bool {
+    active(f, k) && f.state.get(k).is_some_and(|s| s.p_m.z > AIRBORNE_Z_M)
+}
+
+fn plant_state(s: &OnboardState) -> PlantState {
+    let rot = s.q.to_rotation_matrix().into_inner();
+    PlantState {
+        p_m: s.p_m,
+        rot,
+        v_body_m_s: rot.transpose() * s.v_m_s,
+        w_body_rad_s: s.w_body_rad_s,
+    }
+}
+
+fn onboard_state(s: &PlantState) -> OnboardState {
+    OnboardState {
+        p_m: s.p_m,
+        v_m_s: s.rot * s.v_body_m_s,
+        q: UnitQuaternion::from_matrix(&s.rot),
+        w_body_rad_s: s.w_body_rad_s,
+    }
+}
+
+/// What one replay flew: the states at rows `k0 + 1 ..= k0 + states.len()`.
+#[derive(Clone, Debug, Default)]
+pub struct Flown {
+    /// The row it started from.
+    pub start: usize,
+    /// The replayed states, one per row after the start.
+    pub states: Vec<OnboardState>,
+    /// Whether it left the log by more than [`DIVERGED_POS_M`] (the states stop there).
+    pub diverged: bool,
+}
+
+/// Flies `plant` from the logged state at row `k0` for `steps` rows under the controller along
+/// `sps` (the reference with its acceleration, [`setpoints`]). The controller first runs on the
+/// logged states of the `warmup_rows` flown rows before `k0`.
+#[allow(clippy::needless_range_loop)] // rows index the log, the reference and the states together
+pub fn fly(
+    f: &LoopFlight,
+    sps: &[OnboardSetpoint],
+    plant: &Scenario,
+    cfg: &ReplayConfig,
+    k0: usize,
+    steps: usize,
+) -> Flown {
+    let sub = cfg.options.substeps.max(1);
+    let dt_row = if f.len() > 1 {
+        (f.t_s[f.len() - 1] - f.t_s[0]) / (f.len() - 1) as f64
+    } else {
+        0.01
+    };
+    let dt = dt_row / sub as f64;
+    let mut law = Mellinger::new(cfg.controller);
+    law.reset();
+    let mut a = k0;
+    while a > 0 && k0 - a < cfg.warmup_rows && active(f, a - 1) {
+        a -= 1;
+    }
+    for k in a..k0 {
+        for _ in 0..sub {
+            law.step(&f.state[k], &sps[k], dt);
+        }
+    }
+    let mut p = plant.plant();
+    p.set_state(plant_state(&f.state[k0]));
+    let measured = f.erpm[k0].map(|e| e / ERPM_PER_RPM);
+    let start_rpm = if measured.iter().all(|r| r.is_finite()) {
+        measured
+    } else {
+        cfg.map.rpm(&f.cmd[k0])
+    };
+    p.set_rotor_rpm(start_rpm);
+    let mut out = Flown {
+        start: k0,
+        ..Flown::default()
+    };
+    for k in k0..(k0 + steps).min(f.len().saturating_sub(1)) {
+        for _ in 0..sub {
+            let st = onboard_state(p.state());
+            let c = law.step(&st, &sps[k], dt);
+            p.step(cfg.map.rpm(&c), dt);
+        }
+        let s = onboard_state(p.state());
+        let bad = !p.state().is_finite() || (s.p_m - f.state[k + 1].p_m).norm() > DIVERGED_POS_M;
+        if bad {
+            out.diverged = true;
+            break;
+        }
+        out.states.push(s);
+    }
+    out
+}
+
+/// Squared errors pooled over replays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ErrorAcc {
+    /// Replays pooled.
+    pub windows: usize,
+    /// Replays that diverged.
+    pub diverged: usize,
+    /// Steps pooled.
+    pub steps: usize,
+    /// Σ |p − p_log|² (m²).
+    pub pos_sq_m2: f64,
+    /// Σ angle(q, q_log)² (rad²).
+    pub att_sq_rad2: f64,
+}
+
+impl ErrorAcc {
+    /// Adds one replay of `steps` rows started at `k0`; a diverged one's missing steps count at
+    /// the caps.
+    pub fn add(&mut self, f: &LoopFlight, k0: usize, steps: usize, flown: &Flown) {
+        self.windows += 1;
+        for (j, s) in flown.states.iter().enumerate() {
+            let log = &f.state[k0 + 1 + j];
+            self.pos_sq_m2 += (s.p_m - log.p_m).norm_squared();
+            self.att_sq_rad2 += s.q.angle_to(&log.q).powi(2);
+        }
+        self.steps += flown.states.len();
+        if flown.diverged {
+            self.diverged += 1;
+            let miss = steps.saturating_sub(flown.states.len());
+            self.pos_sq_m2 += miss as f64 * DIVERGED_POS_M.powi(2);
+            self.att_sq_rad2 += miss as f64 * DIVERGED_ATT_RAD.powi(2);
+            self.steps += miss;
+        }
+    }
+
+    /// Pools another accumulator in.
+    pub fn merge(&mut self, o: &ErrorAcc) {
+        self.windows += o.windows;
+        self.diverged += o.diverged;
+        self.steps += o.steps;
+        self.pos_sq_m2 += o.pos_sq_m2;
+        self.att_sq_rad2 += o.att_sq_rad2;
+    }
+
+    /// Position RMSE (m); NaN with no steps.
+    pub fn pos_rmse_m(&self) -> f64 {
+        (self.pos_sq_m2 / self.steps as f64).sqrt()
+    }
+
+    /// Attitude RMSE (rad); NaN with no steps.
+    pub fn att_rmse_rad(&self) -> f64 {
+        (self.att_sq_rad2 / self.steps as f64).sqrt()
+    }
+}
+
+/// The start rows of the `steps`-row windows of `f`, every `stride` rows, wholly airborne.
+pub fn window_starts(f: &LoopFlight, steps: usize, stride: usize) -> Vec<usize> {
+    let stride = stride.max(1);
+    let mut out = Vec::new();
+    let mut k0 = 0;
+    while k0 + steps < f.len() {
+        if (k0..=k0 + steps).all(|k| airborne(f, k)) {
+            out.push(k0);
+        }
+        k0 += stride;
+    }
+    out
+}
+
+/// The pooled errors of `plant` over every `steps`-row window of `flights` (every `stride`
+/// rows), the flights shared between two threads.
+pub fn score_windows(
+    flights: &[&LoopFlight],
+    plant: &Scenario,
+    cfg: &ReplayConfig,
+    steps: usize,
+    stride: usize,
+) -> ErrorAcc {
+    let one = |f: &LoopFlight| {
+        let sps = setpoints(f, &cfg.options);
+        let mut acc = ErrorAcc::default();
+        for k0 in window_starts(f, steps, stride) {
+            let flown = fly(f, &sps, plant, cfg, k0, steps);
+            acc.add(f, k0, steps, &flown);
+        }
+        acc
+    };
+    let mut total = ErrorAcc::default();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let one = &one;
+                s.spawn(move || {
+                    let mut acc = ErrorAcc::default();
+                    for f in flights.iter().skip(t).step_by(threads) {
+                        acc.merge(&one(f));
+                    }
+                    acc
+                })
+            })
+            .collect();
+        for h in handles {
+            if let Ok(a) = h.join() {
+                total.merge(&a);
+            }
+        }
+    });
+    total
+}
+
+/// The longest airborne stretch of `f`: (first row, rows).
+pub fn longest_airborne(f: &LoopFlight) -> Option<(usize, usize)> {
+    let mut best: Option<(usize, usize)> = None;
+    let mut k = 0;
+    while k < f.len() {
+        if airborne(f, k) {
+            let a = k;
+            while k < f.len() && airborne(f, k) {
+                k += 1;
+            }
+            if best.is_none_or(|(_, n)| k - a > n) {
+                best = Some((a, k - a));
+            }
+        } else {
+            k += 1;
+        }
+    }
+    best
+}
