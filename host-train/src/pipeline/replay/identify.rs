@@ -9,6 +9,9 @@ use crate::sim::plant::{Residual, ROTOR_XY_SIGN, ROTOR_YAW_SIGN};
 use crate::sim::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
+/// Logged speeds above this (eRPM) are telemetry glitches: the motors reach about 1.45e5.
+pub const MAX_ERPM: f64 = 1.6e5;
+
 /// The plant terms the loop identifies, on top of a base vehicle (the published rigid body).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PlantTerms {
@@ -190,7 +193,12 @@ pub fn fit_open_loop(flights: &[&LoopFlight], base: &Scenario) -> PlantTerms {
                 continue;
             }
             let rpm = f.erpm[k].map(|e| e / ERPM_PER_RPM);
-            if !rpm.iter().all(|r| r.is_finite()) {
+            // Telemetry glitches (far above the 1.45e5 eRPM the motors reach) would dominate
+            // the sums.
+            if !rpm
+                .iter()
+                .all(|r| r.is_finite() && *r * ERPM_PER_RPM < MAX_ERPM)
+            {
                 continue;
             }
             let dt = f.t_s[k + 1] - f.t_s[k - 1];
