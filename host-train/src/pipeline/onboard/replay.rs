@@ -92,7 +92,7 @@ pub fn setpoints(f: &LoopFlight, opt: &ReplayOptions) -> Vec<OnboardSetpoint> {
         .collect()
 }
 
-fn lerp_state(a: &OnboardState, b: &OnboardState, s: f64) -> OnboardState {
+pub(crate) fn lerp_state(a: &OnboardState, b: &OnboardState, s: f64) -> OnboardState {
     OnboardState {
         p_m: a.p_m.lerp(&b.p_m, s),
         v_m_s: a.v_m_s.lerp(&b.v_m_s, s),

@@ -6,7 +6,7 @@
 
 use crate::control::onboard::{Mellinger, OnboardConfig, OnboardLaw};
 use crate::io::{LoopFlight, MotorCommands, OnboardSetpoint, OnboardState};
-use crate::pipeline::onboard::replay::{active, setpoints, ReplayOptions};
+use crate::pipeline::onboard::replay::{active, lerp_state, setpoints, ReplayOptions};
 use crate::sim::plant::PlantState;
 use crate::sim::scenario::Scenario;
 use anyhow::{bail, Result};
@@ -153,14 +153,17 @@ pub fn fly(
     while a > 0 && k0 - a < cfg.warmup_rows && active(f, a - 1) {
         a -= 1;
     }
+    // The logged states interpolated between rows, as the vehicle's controller saw them at its
+    // own rate: held states would make its rate derivative kick at every row.
     for k in a..k0 {
-        for _ in 0..sub {
-            law.step(&f.state[k], &sps[k], dt);
+        for j in 0..sub {
+            let st = lerp_state(&f.state[k], &f.state[k + 1], j as f64 / sub as f64);
+            law.step(&st, &sps[k], dt);
         }
     }
     let mut p = plant.plant();
     p.set_state(plant_state(&f.state[k0]));
-    let measured = f.erpm[k0].map(|e| e / ERPM_PER_RPM);
+    let measured = start_rpm(f, k0);
     let start_rpm = if measured.iter().all(|r| r.is_finite()) {
         measured
     } else {
@@ -186,6 +189,35 @@ pub fn fly(
         out.states.push(s);
     }
     out
+}
+
+/// Logged speeds above this (eRPM) are telemetry glitches: the motors reach about 1.45e5.
+pub const MAX_ERPM: f64 = 1.6e5;
+
+/// Rows either side of a window's start over which the logged rotor speeds are averaged.
+pub const START_RPM_HALF_ROWS: usize = 2;
+
+/// The rotor speeds a replay starts from: the logged ones (eRPM / 6) averaged over
+/// ±[`START_RPM_HALF_ROWS`] rows, glitches left out. The telemetry's noise (several percent of
+/// hover) would otherwise kick every window, and bias a fit that the windows' errors drive.
+pub fn start_rpm(f: &LoopFlight, k0: usize) -> [f64; 4] {
+    let a = k0.saturating_sub(START_RPM_HALF_ROWS);
+    let b = (k0 + START_RPM_HALF_ROWS).min(f.len().saturating_sub(1));
+    let mut sum = [0.0; 4];
+    let mut n = 0.0;
+    for e in f.erpm.get(a..=b).unwrap_or(&[]) {
+        if e.iter().all(|x| x.is_finite() && *x < MAX_ERPM) {
+            for (s, x) in sum.iter_mut().zip(e) {
+                *s += x / ERPM_PER_RPM;
+            }
+            n += 1.0;
+        }
+    }
+    if n > 0.0 {
+        sum.map(|s| s / n)
+    } else {
+        [f64::NAN; 4]
+    }
 }
 
 /// Squared errors pooled over replays.

@@ -9,8 +9,7 @@ use crate::sim::plant::{Residual, ROTOR_XY_SIGN, ROTOR_YAW_SIGN};
 use crate::sim::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
-/// Logged speeds above this (eRPM) are telemetry glitches: the motors reach about 1.45e5.
-pub const MAX_ERPM: f64 = 1.6e5;
+pub use super::closed_loop::MAX_ERPM;
 
 /// The plant terms the loop identifies, on top of a base vehicle (the published rigid body).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -49,9 +49,14 @@ pub struct ReplayArgs {
     /// Rows between window starts.
     #[arg(long, default_value_t = 100)]
     pub stride: usize,
-    /// Rows the controller runs on the logged states before each window.
-    #[arg(long, default_value_t = 100)]
+    /// Rows the controller runs on the logged states before each window (the default reaches
+    /// back to the flight's start: its position integrators hold the whole flight).
+    #[arg(long, default_value_t = 100_000)]
     pub warmup: usize,
+    /// The reference acceleration (the logs have none) is the central difference of the logged
+    /// reference velocity over ± this many rows.
+    #[arg(long, default_value_t = 10)]
+    pub accel_span: usize,
     /// Identify the torque gains and the flapping moment on top of this scenario's vehicle
     /// against the closed-loop error on the training flights; the result joins the plants as
     /// `identified`.
@@ -201,8 +206,9 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
     if args.plants.is_empty() && args.fit.is_none() {
         bail!("give at least one --plant SCENARIO.toml (or --fit BASE.toml)");
     }
-    if args.windows.contains(&0) || args.stride == 0 || args.fit_steps == 0 {
-        bail!("--windows, --stride and --fit-steps must be at least 1");
+    if args.windows.contains(&0) || args.stride == 0 || args.fit_steps == 0 || args.accel_span == 0
+    {
+        bail!("--windows, --stride, --fit-steps and --accel-span must be at least 1");
     }
     let controller = match &args.config {
         Some(p) => OnboardConfig::load(p)?,
@@ -221,7 +227,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
         options: ReplayOptions {
             substeps: 5,
             accel: AccelSource::Diff,
-            accel_span: 10,
+            accel_span: args.accel_span.max(1),
             smooth_rows: 0,
         },
         warmup_rows: args.warmup,

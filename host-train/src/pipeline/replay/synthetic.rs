@@ -88,16 +88,13 @@ pub fn fly_log(
             rpm.map(|w| (w + opt.rpm_noise_frac * hover * gaussian(&mut rng)) * ERPM_PER_RPM),
         );
         f.vbat_v.push(4.0);
+        // The setpoint is held over the row, as the replay holds the logged one.
+        let sp = OnboardSetpoint {
+            a_m_s2: r.a_m_s2,
+            ..logged_sp
+        };
         let mut last = crate::io::MotorCommands::default();
-        for j in 0..sub {
-            let tj = t + j as f64 * dt;
-            let rj = truth.reference(tj);
-            let sp = OnboardSetpoint {
-                p_m: rj.p_m,
-                v_m_s: rj.v_m_s,
-                a_m_s2: rj.a_m_s2,
-                yaw_rad: rj.yaw_rad,
-            };
+        for _ in 0..sub {
             let ps = *plant.state();
             let st = OnboardState {
                 p_m: ps.p_m,
