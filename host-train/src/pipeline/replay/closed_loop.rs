@@ -128,10 +128,91 @@ pub struct Flown {
     pub diverged: bool,
 }
 
+fn dt_sub(f: &LoopFlight, cfg: &ReplayConfig) -> f64 {
+    let dt_row = if f.len() > 1 {
+        (f.t_s[f.len() - 1] - f.t_s[0]) / (f.len() - 1) as f64
+    } else {
+        0.01
+    };
+    dt_row / cfg.options.substeps.max(1) as f64
+}
+
+/// The controller run over row `k` on the logged states interpolated between rows, as the
+/// vehicle's controller saw them at its own rate (held states would make its rate derivative
+/// kick at every row).
+fn warm_row(
+    law: &mut Mellinger,
+    f: &LoopFlight,
+    sps: &[OnboardSetpoint],
+    k: usize,
+    sub: usize,
+    dt: f64,
+) {
+    for j in 0..sub {
+        let st = lerp_state(&f.state[k], &f.state[k + 1], j as f64 / sub as f64);
+        law.step(&st, &sps[k], dt);
+    }
+}
+
+/// The controller as it stood at row `k0`: run on the logged states of the `warmup_rows`
+/// flown rows before it (back to the start of the flown stretch at most).
+pub fn warm_up(
+    f: &LoopFlight,
+    sps: &[OnboardSetpoint],
+    cfg: &ReplayConfig,
+    k0: usize,
+) -> Mellinger {
+    let (sub, dt) = (cfg.options.substeps.max(1), dt_sub(f, cfg));
+    let mut law = Mellinger::new(cfg.controller);
+    law.reset();
+    let mut a = k0;
+    while a > 0 && k0 - a < cfg.warmup_rows && active(f, a - 1) {
+        a -= 1;
+    }
+    for k in a..k0 {
+        warm_row(&mut law, f, sps, k, sub, dt);
+    }
+    law
+}
+
+/// [`warm_up`] at each of `starts` (ascending), in one pass over the flight where the warm-up
+/// reaches back to the start of the flown stretch (the default), else window by window. The
+/// warm-up depends on the log only, so a fit computes it once for all its candidate plants.
+pub fn warm_ups(
+    f: &LoopFlight,
+    sps: &[OnboardSetpoint],
+    cfg: &ReplayConfig,
+    starts: &[usize],
+) -> Vec<Mellinger> {
+    let (sub, dt) = (cfg.options.substeps.max(1), dt_sub(f, cfg));
+    let mut out = Vec::with_capacity(starts.len());
+    let mut law = Mellinger::new(cfg.controller);
+    law.reset();
+    let mut seg_start = 0;
+    let mut k = 0;
+    for &k0 in starts {
+        while k < k0 {
+            if active(f, k) {
+                warm_row(&mut law, f, sps, k, sub, dt);
+            } else {
+                law = Mellinger::new(cfg.controller);
+                law.reset();
+                seg_start = k + 1;
+            }
+            k += 1;
+        }
+        if k0 - seg_start <= cfg.warmup_rows {
+            out.push(law.clone());
+        } else {
+            out.push(warm_up(f, sps, cfg, k0));
+        }
+    }
+    out
+}
+
 /// Flies `plant` from the logged state at row `k0` for `steps` rows under the controller along
 /// `sps` (the reference with its acceleration, [`setpoints`]). The controller first runs on the
 /// logged states of the `warmup_rows` flown rows before `k0`.
-#[allow(clippy::needless_range_loop)] // rows index the log, the reference and the states together
 pub fn fly(
     f: &LoopFlight,
     sps: &[OnboardSetpoint],
@@ -140,27 +221,21 @@ pub fn fly(
     k0: usize,
     steps: usize,
 ) -> Flown {
-    let sub = cfg.options.substeps.max(1);
-    let dt_row = if f.len() > 1 {
-        (f.t_s[f.len() - 1] - f.t_s[0]) / (f.len() - 1) as f64
-    } else {
-        0.01
-    };
-    let dt = dt_row / sub as f64;
-    let mut law = Mellinger::new(cfg.controller);
-    law.reset();
-    let mut a = k0;
-    while a > 0 && k0 - a < cfg.warmup_rows && active(f, a - 1) {
-        a -= 1;
-    }
-    // The logged states interpolated between rows, as the vehicle's controller saw them at its
-    // own rate: held states would make its rate derivative kick at every row.
-    for k in a..k0 {
-        for j in 0..sub {
-            let st = lerp_state(&f.state[k], &f.state[k + 1], j as f64 / sub as f64);
-            law.step(&st, &sps[k], dt);
-        }
-    }
+    fly_warm(f, sps, plant, cfg, warm_up(f, sps, cfg, k0), k0, steps)
+}
+
+/// [`fly`] with the controller already warmed up at `k0` ([`warm_up`]).
+#[allow(clippy::needless_range_loop)] // rows index the log, the reference and the states together
+pub fn fly_warm(
+    f: &LoopFlight,
+    sps: &[OnboardSetpoint],
+    plant: &Scenario,
+    cfg: &ReplayConfig,
+    mut law: Mellinger,
+    k0: usize,
+    steps: usize,
+) -> Flown {
+    let (sub, dt) = (cfg.options.substeps.max(1), dt_sub(f, cfg));
     let mut p = plant.plant();
     p.set_state(plant_state(&f.state[k0]));
     let measured = start_rpm(f, k0);
@@ -290,7 +365,96 @@ pub fn window_starts(f: &LoopFlight, steps: usize, stride: usize) -> Vec<usize> 
 }
 
 /// The pooled errors of `plant` over every `steps`-row window of `flights` (every `stride`
-/// rows), the flights shared between two threads.
+/// The windows of a set of flights with the controller warmed up at each start: what every
+/// candidate plant is flown from.
+pub struct Warmed<'a> {
+    flights: Vec<WarmedFlight<'a>>,
+    steps: usize,
+}
+
+struct WarmedFlight<'a> {
+    f: &'a LoopFlight,
+    sps: Vec<OnboardSetpoint>,
+    starts: Vec<usize>,
+    laws: Vec<Mellinger>,
+}
+
+impl<'a> Warmed<'a> {
+    /// `steps`-row windows every `stride` rows of `flights`, warmed up.
+    pub fn new(
+        flights: &[&'a LoopFlight],
+        cfg: &ReplayConfig,
+        steps: usize,
+        stride: usize,
+    ) -> Self {
+        let one = |f: &'a LoopFlight| {
+            let sps = setpoints(f, &cfg.options);
+            let starts = window_starts(f, steps, stride);
+            let laws = warm_ups(f, &sps, cfg, &starts);
+            WarmedFlight {
+                f,
+                sps,
+                starts,
+                laws,
+            }
+        };
+        Self {
+            flights: par_map(flights, &one),
+            steps,
+        }
+    }
+
+    /// `plant`'s pooled errors over the windows.
+    pub fn score(&self, plant: &Scenario, cfg: &ReplayConfig) -> ErrorAcc {
+        let one = |w: &WarmedFlight| {
+            let mut acc = ErrorAcc::default();
+            for (k0, law) in w.starts.iter().zip(&w.laws) {
+                let flown = fly_warm(w.f, &w.sps, plant, cfg, law.clone(), *k0, self.steps);
+                acc.add(w.f, *k0, self.steps, &flown);
+            }
+            acc
+        };
+        let refs: Vec<&WarmedFlight> = self.flights.iter().collect();
+        let mut total = ErrorAcc::default();
+        for a in par_map(&refs, &|w: &WarmedFlight| one(w)) {
+            total.merge(&a);
+        }
+        total
+    }
+}
+
+/// `g` over `items` on up to 4 threads, in order.
+fn par_map<T: Sync + Copy, R: Send>(items: &[T], g: &(impl Fn(T) -> R + Sync)) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get().min(4))
+        .min(items.len().max(1));
+    let mut out: Vec<Option<R>> = (0..items.len()).map(|_| None).collect();
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                s.spawn(move || {
+                    items
+                        .iter()
+                        .enumerate()
+                        .skip(t)
+                        .step_by(threads)
+                        .map(|(i, x)| (i, g(*x)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        for h in handles {
+            if let Ok(v) = h.join() {
+                for (i, r) in v {
+                    out[i] = Some(r);
+                }
+            }
+        }
+    });
+    out.into_iter().flatten().collect()
+}
+
+/// `plant`'s pooled errors over `steps`-row windows every `stride` rows of `flights`.
 pub fn score_windows(
     flights: &[&LoopFlight],
     plant: &Scenario,
@@ -298,37 +462,7 @@ pub fn score_windows(
     steps: usize,
     stride: usize,
 ) -> ErrorAcc {
-    let one = |f: &LoopFlight| {
-        let sps = setpoints(f, &cfg.options);
-        let mut acc = ErrorAcc::default();
-        for k0 in window_starts(f, steps, stride) {
-            let flown = fly(f, &sps, plant, cfg, k0, steps);
-            acc.add(f, k0, steps, &flown);
-        }
-        acc
-    };
-    let mut total = ErrorAcc::default();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
-    std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
-                s.spawn(move || {
-                    let mut acc = ErrorAcc::default();
-                    for f in flights.iter().skip(t).step_by(threads) {
-                        acc.merge(&one(f));
-                    }
-                    acc
-                })
-            })
-            .collect();
-        for h in handles {
-            if let Ok(a) = h.join() {
-                total.merge(&a);
-            }
-        }
-    });
-    total
+    Warmed::new(flights, cfg, steps, stride).score(plant, cfg)
 }
 
 /// The longest airborne stretch of `f`: (first row, rows).

@@ -3,7 +3,7 @@
 //! for comparison, the open-loop one-step regression of the logged angular acceleration on the
 //! torques of the logged rotor speeds, which noisy speeds bias toward zero.
 
-use super::closed_loop::{airborne, score_windows, ReplayConfig, ERPM_PER_RPM};
+use super::closed_loop::{airborne, ReplayConfig, Warmed, ERPM_PER_RPM};
 use crate::io::LoopFlight;
 use crate::sim::plant::{Residual, ROTOR_XY_SIGN, ROTOR_YAW_SIGN};
 use crate::sim::scenario::Scenario;
@@ -60,15 +60,13 @@ pub struct LoopFit {
 /// The fit's objective: the closed-loop windows' mean squared attitude and position errors,
 /// each relative to the rigid body's (so neither unit dominates).
 fn objective(
-    flights: &[&LoopFlight],
+    warm: &Warmed,
     base: &Scenario,
     cfg: &ReplayConfig,
-    steps: usize,
-    stride: usize,
     norm: (f64, f64),
     t: &PlantTerms,
 ) -> f64 {
-    let e = score_windows(flights, &t.apply(base), cfg, steps, stride);
+    let e = warm.score(&t.apply(base), cfg);
     let n = e.steps.max(1) as f64;
     e.att_sq_rad2 / n / norm.0 + e.pos_sq_m2 / n / norm.1
 }
@@ -83,7 +81,8 @@ pub fn fit_loop(
     stride: usize,
     max_evals: usize,
 ) -> LoopFit {
-    let e0 = score_windows(flights, &PlantTerms::RIGID.apply(base), cfg, steps, stride);
+    let warm = Warmed::new(flights, cfg, steps, stride);
+    let e0 = warm.score(&PlantTerms::RIGID.apply(base), cfg);
     let n0 = e0.steps.max(1) as f64;
     let norm = (
         (e0.att_sq_rad2 / n0).max(1e-12),
@@ -94,7 +93,7 @@ pub fn fit_loop(
         torque_gain: [x[0].exp(), x[1].exp(), x[2].exp()],
         flap_rad_s2_per_m_s: 5.0 * x[3],
     };
-    let f = |x: &[f64; 4]| objective(flights, base, cfg, steps, stride, norm, &terms(x));
+    let f = |x: &[f64; 4]| objective(&warm, base, cfg, norm, &terms(x));
     let (x, fx, evals) = nelder_mead(f, [0.0; 4], 0.5, max_evals);
     LoopFit {
         terms: terms(&x),
