@@ -99,6 +99,27 @@ echo "== 4c. learn the port terms into the blob that flies (about 90 s, then the
     --motor-tau-s 0.0325 --flight-check "$repo/scenarios/bl-real-calm-spiral.toml" \
     --out "$work/flying.hfw" 2>&1 | tee "$work/fit-port.log"
 
+echo "== 4c'. what to upload: each blob flown on the identified vehicle and the rigid one, both laws"
+# The closed loop identifies the real vehicle's torques as the rigid body's, with a flapping
+# moment (scenarios/bl-id-*.toml, docs/benchmark.md "Closed-loop identification"). A blob a
+# user uploads must fly that plant and the rigid published one under both laws; the table says
+# which of this run's blobs do (upload-check.txt). flying.hfw is the best predictor; its weak
+# torque gains are the closed-loop artefact, and it is not for upload unless the table says so.
+{
+    printf '%-12s %-20s %-20s %s\n' blob plant law "result (RMSE t >= 5 s)"
+    for blob in pinned flying; do
+        for plant in bl-id-calm-spiral bl-calm-spiral; do
+            for law in adaptive-gradient adaptive-composite; do
+                "$HT" eval --scenario "$repo/scenarios/$plant.toml" --controller "$law" \
+                    --weights "$work/$blob.hfw" --out "$work/upload-check/$blob-$plant-$law" >/dev/null 2>&1
+                r=$("$PY" -c 'import json,sys; d=json.load(open(sys.argv[1])); print("CRASH at %.2f s" % d["crash_time_s"] if d["crashed"] else "%.3f cm" % (100 * d["rmse_pos_window_m"]))' \
+                    "$work/upload-check/$blob-$plant-$law/report.json")
+                printf '%-12s %-20s %-20s %s\n' "$blob.hfw" "$plant" "$law" "$r"
+            done
+        done
+    done
+} | tee "$work/upload-check.txt"
+
 echo "== 4d. (host-side, does not fly) the pinned blob's measured-input response"
 
 "$HT" fit-response --weights "$work/pinned.hfw" --data "$work/train-raw" --horizon 50 \
