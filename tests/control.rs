@@ -452,3 +452,60 @@ fn per_axis_factors_follow_the_inertia() {
     };
     assert_eq!(Gains::for_vehicle(&bad).attitude_axis_scale, ones);
 }
+
+/// Altitude first (issue 51): with a demand far past the tilt limit and the body still turning
+/// towards it, the thrust's vertical component is the weight (the law's F_z at zero height
+/// error), not the larger one the plain projection F·b₃ gives; a body tilted past a vertical
+/// demand keeps the projection.
+#[test]
+fn the_thrust_keeps_the_vertical_force_while_the_body_lags_the_demand() {
+    let gains = Gains {
+        shaping_omega_rad_s: 0.0,
+        ..Gains::default()
+    };
+    let weight_n = NominalModel::default().mass_kg() * hamflight::model::GRAVITY_M_S2;
+    let pitched = |theta: f32| State {
+        p_m: Vector3::new(0.0, 0.0, 1.0),
+        // About body y: the body axis b₃ = (sin θ, 0, cos θ) leans towards +x.
+        rot: Matrix3::new(
+            theta.cos(),
+            0.0,
+            theta.sin(),
+            0.0,
+            1.0,
+            0.0,
+            -theta.sin(),
+            0.0,
+            theta.cos(),
+        ),
+        ..State::default()
+    };
+    for theta in [0.0f32, 0.15, 0.3, 0.5] {
+        let mut fc = FlightController::new(NominalModel::default(), gains);
+        let far = Setpoint::hover(Vector3::new(0.9, 0.0, 1.0), 0.0);
+        let out = fc.step(&pitched(theta), &far, 0.002);
+        assert!(
+            out.faults.tilt_limited,
+            "θ = {theta}: the step is past the limit"
+        );
+        let up_n = out.wrench.thrust_n * theta.cos();
+        assert!(
+            (up_n - weight_n).abs() < 1e-3 * weight_n,
+            "θ = {theta}: vertical thrust {up_n} N against the weight {weight_n} N"
+        );
+    }
+    // A body tilted past a vertical demand: the projection (less than the weight upwards).
+    let mut fc = FlightController::new(NominalModel::default(), gains);
+    let theta = 0.3f32;
+    let out = fc.step(
+        &pitched(theta),
+        &Setpoint::hover(Vector3::new(0.0, 0.0, 1.0), 0.0),
+        0.002,
+    );
+    assert!(!out.faults.tilt_limited);
+    assert!(
+        (out.wrench.thrust_n - weight_n * theta.cos()).abs() < 1e-3 * weight_n,
+        "{} N",
+        out.wrench.thrust_n
+    );
+}

@@ -77,13 +77,24 @@ impl<M: HamiltonianModel> FlightController<M> {
         }
         #[cfg(not(feature = "composite"))]
         let _ = dt_s;
-        let att = desired_attitude(
-            &(r * b_v),
-            &f_dot,
-            sp.yaw_rad,
-            sp.yaw_rate_rad_s,
-            &self.tilt,
-        );
+        let f_w = r * b_v;
+        let att = desired_attitude(&f_w, &f_dot, sp.yaw_rad, sp.yaw_rate_rad_s, &self.tilt);
+        // Altitude first (issue 51): the thrust never gives more vertical force than the law
+        // wants. Past the tilt limit the aim is the limited force b₃* F_z / b₃*,z, which keeps
+        // F_z and gives up the horizontal part beyond the limit; and while the body axis b₃ is
+        // tilted less far than the aim (it lags behind b₃* at a step), the projection
+        // F·b₃ would give more than F_z upwards, so the thrust is F_z / b₃,z instead: the
+        // vertical force stays the law's and the body gives up horizontal force until it has
+        // turned. When b₃ is tilted further than the aim the projection is already the smaller.
+        let b3 = Vector3::new(r.m13, r.m23, r.m33);
+        if f_w.z > 0.0 && b3.z > MIN_UPRIGHT {
+            let b3_star_z = att.rot.m33;
+            if att.tilt_limited && b3_star_z > MIN_UPRIGHT {
+                let b3_star = Vector3::new(att.rot.m13, att.rot.m23, b3_star_z);
+                b_v.z = b3.dot(&(b3_star * (f_w.z / b3_star_z)));
+            }
+            b_v.z = b_v.z.min(f_w.z / b3.z);
+        }
         let e_r = crate::lie::rotation_error(r, &att.rot);
         let w_des_body = rt * att.rot * att.w_rad_s;
         let e_w = w - w_des_body;
@@ -120,6 +131,10 @@ impl<M: HamiltonianModel> FlightController<M> {
         }
     }
 }
+
+/// The least upward component (world z) of the body axis or of b₃* for which the altitude-first
+/// thrust divides by it; below it (past ≈ 84°) the projection alone is used.
+const MIN_UPRIGHT: f32 = 0.1;
 
 /// What [`FlightController::demand`] gives the rest of the step.
 pub(super) struct Demand {
