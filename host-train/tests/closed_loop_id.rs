@@ -6,13 +6,13 @@
 //!
 //! `cargo test --release -p host-train --test closed_loop_id -- --nocapture`
 
-use host_train::control::onboard::OnboardConfig;
+use host_train::control::OnboardConfig;
 use host_train::io::LoopFlight;
-use host_train::pipeline::onboard::replay::{AccelSource, ReplayOptions};
-use host_train::pipeline::replay::closed_loop::{score_windows, ReplayConfig, RotorMap};
-use host_train::pipeline::replay::identify::{fit_loop, fit_open_loop, PlantTerms};
-use host_train::pipeline::replay::synthetic::{fly_log, SyntheticLog, BENCHMARK_MAP};
-use host_train::sim::scenario::Trajectory;
+use host_train::pipeline::{
+    fit_loop, fit_open_loop, fly_log, score_windows, AccelSource, PlantTerms, ReplayConfig,
+    ReplayOptions, RotorMap, SyntheticLog, BENCHMARK_MAP,
+};
+use host_train::sim::Trajectory;
 use host_train::Scenario;
 
 /// Legs of 1.5 s: brisk (about 0.5 m/s, 1.5 m/s²) yet short of saturating the motors, where a

@@ -29,7 +29,11 @@ pub use check::{
     scenario_spec as flight_check_scenario_spec, ADAPTIVE_MARGIN as FLIGHT_CHECK_ADAPTIVE_MARGIN,
 };
 pub use fit_response::load_response;
+pub use onboard::replay::{AccelSource, ReplayOptions};
 pub use prior_check::{prior_of, run as run_prior_check, run_with_safety as run_safety_check};
+pub use replay::closed_loop::{score_windows, ReplayConfig, RotorMap};
+pub use replay::identify::{fit_loop, fit_open_loop, PlantTerms};
+pub use replay::synthetic::{fly_log, SyntheticLog, BENCHMARK_MAP};
 pub use robustness::{fly_cell as fly_robustness_cell, load_scenario as load_robustness_scenario};
 pub use score::{run as run_score, table as score_table, ScoreArgs};
 pub use train::{run as run_train, run_cli as run_train_cli};

@@ -18,7 +18,7 @@ pub use plant::{
     gaussian, rot_from_rpy, so3_exp, Disturbance, Effects, Plant, PlantState, StateNoise,
     VehicleParams,
 };
-pub use scenario::{figure_eight, Scenario, ScenarioSpec};
+pub use scenario::{figure_eight, Scenario, ScenarioSpec, Trajectory};
 pub use sensors::SensorSpec;
 pub use trajectory::TrajectoryPoint;
 pub use vehicle::{VehicleFile, RPM_PER_RAD_S};
