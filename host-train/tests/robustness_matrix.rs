@@ -44,3 +44,40 @@ fn the_delay_line_delays_the_commands() {
     assert!(differ(&a.err_m, &b.err_m), "8 ms of delay changed nothing");
     assert!(differ(&b.err_m, &c.err_m), "6 ms of jitter changed nothing");
 }
+
+/// The motor-lag watch (`Gains::lag_watch`, off by default for the step budget) on the cells a
+/// wrong stated lag breaks: each fails without it (crash or limit cycle) and flies with it.
+#[test]
+fn the_lag_watch_flies_the_mismatched_cells() {
+    use host_train::pipeline::fly_robustness_cell_watched as watched;
+    let weights = root().join("weights/default.hfw");
+    let sc = load_scenario(&root().join("scenarios"), "hover", 6.0).expect("scenario");
+    // (plant lag, blob lag, delay, jitter) ms.
+    let cells = [
+        (80.0, 0.0, 8.0, 6.0),
+        (0.0, 80.0, 8.0, 0.0),
+        (20.0, 80.0, 8.0, 0.0),
+        (0.0, 50.0, 8.0, 6.0),
+    ];
+    let mut failures = Vec::new();
+    for law in ["adaptive", "adaptive-gradient"] {
+        for (pl, bl, d, j) in cells {
+            let fly = |on| {
+                watched(&weights, law, &sc, (pl, bl), d, j, on)
+                    .expect("flies")
+                    .0
+            };
+            let (off, on) = (fly(false), fly(true));
+            println!("{law} plant {pl} blob {bl} delay {d}+{j}: off {off:?}, on {on:?}");
+            if law == "adaptive" && !off.failed() {
+                failures.push(format!(
+                    "{law} {pl}/{bl} {d}+{j}: fails no more without the watch"
+                ));
+            }
+            if on.failed() || on.rmse_m > 0.02 {
+                failures.push(format!("{law} {pl}/{bl} {d}+{j} with the watch: {on:?}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}

@@ -28,9 +28,11 @@ use nalgebra::{Matrix3, Matrix4, SVector, Vector3, Vector4};
 mod actuation;
 mod demand;
 mod estimation;
+mod lag_watch;
 
 use actuation::Actuation;
 use demand::Demand;
+pub use lag_watch::{LagWatch, CANDIDATE_TAUS_S};
 
 /// Faults and conditions of one step. Any of the first four means the output is
 /// [`RotorCommand::OFF`].
@@ -138,6 +140,8 @@ pub struct FlightController<M> {
     /// True if the model carries port terms ([`crate::model::PortTerms`]) other than the
     /// identity: the law then compensates them (read once, at construction).
     port_active: bool,
+    /// The motor-lag watch ([`Gains::lag_watch`]).
+    watch: LagWatch,
 }
 
 impl<M: HamiltonianModel> FlightController<M> {
@@ -158,6 +162,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             prev_p_m: None,
             velocity_correction_m_s: Vector3::zeros(),
             terms: ModelTerms::ZERO,
+            watch: LagWatch::default(),
         }
     }
 
@@ -186,6 +191,7 @@ impl<M: HamiltonianModel> FlightController<M> {
             (&raw mut (*dst).prev_p_m).write(None);
             (&raw mut (*dst).velocity_correction_m_s).write(Vector3::zeros());
             (&raw mut (*dst).terms).write(ModelTerms::ZERO);
+            (&raw mut (*dst).watch).write(LagWatch::default());
         }
     }
 
@@ -207,6 +213,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         self.comp_rate_n_s = Vector3::zeros();
         self.u_model = None;
         self.prev_p_m = None;
+        self.unwatch_lag();
     }
 
     fn safe(&mut self, faults: Faults) -> Output {
@@ -214,6 +221,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         self.u_model = None;
         self.prev_p_m = None;
         self.shaper.reset();
+        self.watch.restart();
         // The next good tick does not follow this one by one interval, and nothing was delivered.
         self.adaptation.break_sequence();
         self.adaptation.record_input(&Wrench::default());
@@ -328,6 +336,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         if self.gains.adapt {
             self.adapt(state, meas, &inertia, &demand, &act, dt_s);
         }
+        self.watch_lag(state, &inertia, &act, dt_s);
         *out = Output {
             rotors: act.rotors,
             wrench: act.wrench,

@@ -34,7 +34,10 @@ pub use prior_check::{prior_of, run as run_prior_check, run_with_safety as run_s
 pub use replay::closed_loop::{score_windows, ReplayConfig, RotorMap};
 pub use replay::identify::{fit_loop, fit_open_loop, PlantTerms};
 pub use replay::synthetic::{fly_log, SyntheticLog, BENCHMARK_MAP};
-pub use robustness::{fly_cell as fly_robustness_cell, load_scenario as load_robustness_scenario};
+pub use robustness::{
+    fly_cell as fly_robustness_cell, fly_cell_watched as fly_robustness_cell_watched,
+    load_scenario as load_robustness_scenario, score as robustness_score,
+};
 pub use score::{run as run_score, table as score_table, ScoreArgs};
 pub use train::{run as run_train, run_cli as run_train_cli};
 pub use vehicle_study::{

@@ -93,6 +93,10 @@ pub struct RobustnessArgs {
     /// Skip the delay-margin search.
     #[arg(long)]
     pub no_margin: bool,
+    /// Fly every cell with the core's motor-lag watch on (`Gains::lag_watch`, off by default:
+    /// docs/envelope.md, "The lag watch").
+    #[arg(long)]
+    pub lag_watch: bool,
 }
 
 /// The matrix to fly.
@@ -263,6 +267,21 @@ pub fn fly_cell(
     delay_ms: f64,
     jitter_ms: f64,
 ) -> Result<(FlightScore, FlightLog)> {
+    let lags = (plant_lag_ms, blob_lag_ms);
+    fly_cell_watched(weights, law, scenario, lags, delay_ms, jitter_ms, false)
+}
+
+/// [`fly_cell`] with the core's motor-lag watch on or off (`Gains::lag_watch`); `lags_ms` is
+/// (plant, blob).
+pub fn fly_cell_watched(
+    weights: &Path,
+    law: &str,
+    scenario: &Scenario,
+    (plant_lag_ms, blob_lag_ms): (f64, f64),
+    delay_ms: f64,
+    jitter_ms: f64,
+    lag_watch: bool,
+) -> Result<(FlightScore, FlightLog)> {
     let mut sc = scenario.clone();
     sc.spec.effects.motor_tau_s = plant_lag_ms * 1e-3;
     sc.spec.effects.command_delay_s = delay_ms * 1e-3;
@@ -270,7 +289,10 @@ pub fn fly_cell(
     let spec = ControllerSpec::parse_core(law)?;
     let mut model = load_learned(weights)?;
     model.set_motor_tau_s((blob_lag_ms * 1e-3) as f32);
-    let gains = spec.gains(gains_for(&model));
+    let gains = hamflight::Gains {
+        lag_watch,
+        ..spec.gains(gains_for(&model))
+    };
     let mut ctrl = CoreController::new(spec.name, model, gains);
     let log = fly(&sc, &mut ctrl as &mut dyn Controller);
     let max_rpm = sc.plant().params.max_rpm();
@@ -340,10 +362,12 @@ pub fn delay_margin_ms(
     blob_lag_ms: f64,
     step_ms: f64,
     max_ms: f64,
+    lag_watch: bool,
 ) -> Result<Option<f64>> {
     let mut d = step_ms;
     while d <= max_ms + 1e-9 {
-        let (s, _) = fly_cell(weights, law, scenario, plant_lag_ms, blob_lag_ms, d, 0.0)?;
+        let lags = (plant_lag_ms, blob_lag_ms);
+        let (s, _) = fly_cell_watched(weights, law, scenario, lags, d, 0.0, lag_watch)?;
         if s.failed() {
             return Ok(Some(d));
         }
@@ -399,7 +423,15 @@ pub fn run(args: &RobustnessArgs) -> Result<RobustnessReport> {
                 for &bl in &grid.blob_lag_ms {
                     for &d in &grid.delay_ms {
                         for &j in &grid.jitter_ms {
-                            let (s, _) = fly_cell(&args.weights, law, &sc, pl, bl, d, j)?;
+                            let (s, _) = fly_cell_watched(
+                                &args.weights,
+                                law,
+                                &sc,
+                                (pl, bl),
+                                d,
+                                j,
+                                args.lag_watch,
+                            )?;
                             done += 1;
                             eprintln!(
                                 "[{done}/{total} {:.0} s] {stem} {law} plant {pl} ms blob {bl} ms \
@@ -430,6 +462,7 @@ pub fn run(args: &RobustnessArgs) -> Result<RobustnessReport> {
                             bl,
                             grid.margin_step_ms,
                             grid.margin_max_ms,
+                            args.lag_watch,
                         )?;
                         eprintln!(
                             "[{:.0} s] {stem} {law} plant {pl} ms blob {bl} ms: delay margin {}",
