@@ -32,7 +32,11 @@ mod lag_watch;
 
 use actuation::Actuation;
 use demand::Demand;
-pub use lag_watch::{LagWatch, CANDIDATE_TAUS_S};
+pub use lag_watch::{
+    LagWatch, CANDIDATE_TAUS_S, DECIDE_TICKS, DELAY_TICKS, GROWTH_FLOOR_NM2, GROWTH_RATIO,
+    GROWTH_TAU_S, HIGH_PASS_TAU_S, MIN_EXCITATION_NM2, PITCH_WEIGHT, SCALE_SPAN, SLOTS,
+    SWITCH_HOLD_EXCITED_S, SWITCH_HOLD_S, SWITCH_RATIO, SWITCH_REST_S, WINDOW_S,
+};
 
 /// Faults and conditions of one step. Any of the first four means the output is
 /// [`RotorCommand::OFF`].
