@@ -453,7 +453,7 @@ fn per_axis_factors_follow_the_inertia() {
     assert_eq!(Gains::for_vehicle(&bad).attitude_axis_scale, ones);
 }
 
-/// Altitude first (issue 51): with a demand far past the tilt limit and the body still turning
+/// Altitude first: with a demand far past the tilt limit and the body still turning
 /// towards it, the thrust's vertical component is the weight (the law's F_z at zero height
 /// error), not the larger one the plain projection F·b₃ gives; a body tilted past a vertical
 /// demand keeps the projection.

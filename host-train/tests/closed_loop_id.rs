@@ -1,5 +1,5 @@
 //! Closed-loop identification on synthetic vehicles flown by the same onboard controller
-//! (issue 50's "done when"): a plant with a known weak torque gain and one with a known
+//! (the closed-loop identification's acceptance): a plant with a known weak torque gain and one with a known
 //! flapping moment are told apart by the closed-loop replay and recovered by the closed-loop
 //! fit within 10 % per term, while the open-loop one-step regression on the same logs, with
 //! the logged rotor speeds as noisy as the benchmark's, is biased toward zero.

@@ -1,4 +1,4 @@
-//! Altitude first at the tilt limit (issue 51, item 2): a horizontal step far past the tilt
+//! Altitude first at the tilt limit: a horizontal step far past the tilt
 //! limit must not turn into a climb. The thrust keeps the vertical force the law wants and gives
 //! up horizontal force, past the limit and while the body turns towards the demand. Before the
 //! altitude-first thrust `adaptive` climbed 3.5 cm here; with it 1.8 cm (`adaptive`) and 1.3 cm

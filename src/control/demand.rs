@@ -79,7 +79,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         let _ = dt_s;
         let f_w = r * b_v;
         let att = desired_attitude(&f_w, &f_dot, sp.yaw_rad, sp.yaw_rate_rad_s, &self.tilt);
-        // Altitude first (issue 51): the thrust never gives more vertical force than the law
+        // Altitude first: the thrust never gives more vertical force than the law
         // wants. Past the tilt limit the aim is the limited force b₃* F_z / b₃*,z, which keeps
         // F_z and gives up the horizontal part beyond the limit; and while the body axis b₃ is
         // tilted less far than the aim (it lags behind b₃* at a step), the projection
