@@ -196,11 +196,11 @@ pub const SATURATED_DRIVE_M: f32 = 0.02;
 /// [`AdaptationRates::saturated_drive_rad`] of the tuned gains (rad).
 pub const SATURATED_DRIVE_RAD: f32 = 0.05;
 
-/// Whether [`Gains::for_vehicle`] turns the motor-lag watch on ([`Gains::lag_watch`]). Off for
-/// now: it removes 23 of the 26 failing rows of the robustness matrix (docs/envelope.md, "The
-/// lag watch"), but its filters cost about 400 instructions a step and its decision tick 800,
-/// which the 10,000-instruction step budget does not hold yet.
-pub const LAG_WATCH: bool = false;
+/// Whether [`Gains::for_vehicle`] turns the motor-lag watch on ([`Gains::lag_watch`]): on. It
+/// removes 22 of the 26 failing rows of the robustness matrix (docs/envelope.md, "The lag
+/// watch") for about 260 instructions a step (`firmware/report.sh`: 9,889 mean and 9,946 worst
+/// of the 10,000 budget).
+pub const LAG_WATCH: bool = true;
 
 /// The symmetric-optimum spacing a of the attitude design: the PD zero at ω_c / a, the lag at
 /// a ω_c; a = 3 gives a phase margin of atan 3 − atan ⅓ ≈ 53° on the design model.

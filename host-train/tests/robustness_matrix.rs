@@ -45,8 +45,8 @@ fn the_delay_line_delays_the_commands() {
     assert!(differ(&b.err_m, &c.err_m), "6 ms of jitter changed nothing");
 }
 
-/// The motor-lag watch (`Gains::lag_watch`, off by default for the step budget) on the cells a
-/// wrong stated lag breaks: each fails without it (crash or limit cycle) and flies with it.
+/// The motor-lag watch (`Gains::lag_watch`, on by default) on the cells a wrong stated lag
+/// breaks: each fails without it (crash or limit cycle) and flies with it.
 #[test]
 fn the_lag_watch_flies_the_mismatched_cells() {
     use host_train::pipeline::fly_robustness_cell_watched as watched;

@@ -36,7 +36,7 @@ extern "C" {
 #define HF_FEATURES 6
 
 /* Bytes of opaque storage a controller needs (the Rust side asserts its state fits). */
-#define HF_CONTROLLER_STORAGE_BYTES 1776
+#define HF_CONTROLLER_STORAGE_BYTES 1816
 
 /* ---- Fault and condition flags (hf_output_t.faults, hf_last_faults) ----
  * Any bit of HF_FAULT_MASK means the output is a zero wrench (motors off).

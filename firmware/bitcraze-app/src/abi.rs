@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 /// `HF_FEATURES`.
 pub const FEATURES: usize = hamflight::model::FEATURES;
 /// `HF_CONTROLLER_STORAGE_BYTES`.
-pub const CONTROLLER_STORAGE_BYTES: usize = 1776;
+pub const CONTROLLER_STORAGE_BYTES: usize = 1816;
 
 /// `HF_MODEL_STORAGE_BYTES`: the upload slot, first the blob's bytes, then the model decoded
 /// from them in place (the larger of the two, 8-byte aligned; asserted in `lib.rs`).

@@ -93,10 +93,10 @@ pub struct RobustnessArgs {
     /// Skip the delay-margin search.
     #[arg(long)]
     pub no_margin: bool,
-    /// Fly every cell with the core's motor-lag watch on (`Gains::lag_watch`, off by default:
-    /// docs/envelope.md, "The lag watch").
+    /// Fly every cell with the core's motor-lag watch off (`Gains::lag_watch`, on by default:
+    /// docs/envelope.md, "The lag watch"), to see what it removes.
     #[arg(long)]
-    pub lag_watch: bool,
+    pub no_lag_watch: bool,
 }
 
 /// The matrix to fly.
@@ -257,7 +257,8 @@ pub struct RobustnessReport {
 }
 
 /// One flight of a law on `scenario` with the plant's rotor lag, the blob's motor lag, an added
-/// delay and a jitter (all ms).
+/// delay and a jitter (all ms), the lag watch as the core's default has it
+/// ([`hamflight::gains::LAG_WATCH`]).
 pub fn fly_cell(
     weights: &Path,
     law: &str,
@@ -268,7 +269,8 @@ pub fn fly_cell(
     jitter_ms: f64,
 ) -> Result<(FlightScore, FlightLog)> {
     let lags = (plant_lag_ms, blob_lag_ms);
-    fly_cell_watched(weights, law, scenario, lags, delay_ms, jitter_ms, false)
+    let watch = hamflight::gains::LAG_WATCH;
+    fly_cell_watched(weights, law, scenario, lags, delay_ms, jitter_ms, watch)
 }
 
 /// [`fly_cell`] with the core's motor-lag watch on or off (`Gains::lag_watch`); `lags_ms` is
@@ -430,7 +432,7 @@ pub fn run(args: &RobustnessArgs) -> Result<RobustnessReport> {
                                 (pl, bl),
                                 d,
                                 j,
-                                args.lag_watch,
+                                !args.no_lag_watch,
                             )?;
                             done += 1;
                             eprintln!(
@@ -462,7 +464,7 @@ pub fn run(args: &RobustnessArgs) -> Result<RobustnessReport> {
                             bl,
                             grid.margin_step_ms,
                             grid.margin_max_ms,
-                            args.lag_watch,
+                            !args.no_lag_watch,
                         )?;
                         eprintln!(
                             "[{:.0} s] {stem} {law} plant {pl} ms blob {bl} ms: delay margin {}",
