@@ -5,7 +5,8 @@
 //!         [SCENARIO] [LAW] [PLANT_LAG_MS] [BLOB_LAG_MS] [DELAY_MS] [JITTER_MS]
 //!
 //! Defaults: hover, adaptive, plant 80 ms, blob 0 ms, no delay, no jitter. The watch is on
-//! (`Gains::lag_watch`) unless `NO_WATCH` is set; `TRACE=1` prints its scores every 50 ms.
+//! (`Gains::lag_watch`) unless `NO_WATCH` is set; `TRACE=1` prints its scores every 50 ms;
+//! `WEIGHTS=FILE.hfw` flies another blob (default weights/default.hfw).
 use host_train::control::{gains_for, load_learned, Controller, ControllerSpec, CoreController};
 use host_train::fly::{fly_scenario, FlightLog};
 use host_train::pipeline::load_robustness_scenario;
@@ -71,7 +72,11 @@ fn main() -> anyhow::Result<()> {
     sc.spec.effects.command_delay_s = delay * 1e-3;
     sc.spec.effects.command_jitter_s = jitter * 1e-3;
     let spec = ControllerSpec::parse_core(&law)?;
-    let mut model = load_learned(Path::new(host_train::control::DEFAULT_WEIGHTS))?;
+    let weights = std::env::var("WEIGHTS");
+    let weights = weights
+        .as_deref()
+        .unwrap_or(host_train::control::DEFAULT_WEIGHTS);
+    let mut model = load_learned(Path::new(weights))?;
     model.set_motor_tau_s((blob * 1e-3) as f32);
     let gains = hamflight::Gains {
         lag_watch: std::env::var_os("NO_WATCH").is_none(),
