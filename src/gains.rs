@@ -197,8 +197,8 @@ pub const SATURATED_DRIVE_M: f32 = 0.02;
 pub const SATURATED_DRIVE_RAD: f32 = 0.05;
 
 /// Whether [`Gains::for_vehicle`] turns the motor-lag watch on ([`Gains::lag_watch`]): on. It
-/// removes 22 of the 26 failing rows of the robustness matrix (docs/envelope.md, "The lag
-/// watch") for about 260 instructions a step (`firmware/report.sh`: 9,889 mean and 9,946 worst
+/// removes 19 of the 26 failing rows of the robustness matrix (docs/envelope.md, "The lag
+/// watch") for about 260 instructions a step (`firmware/report.sh`: 9,889 mean and 9,952 worst
 /// of the 10,000 budget).
 pub const LAG_WATCH: bool = true;
 
