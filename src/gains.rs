@@ -198,7 +198,7 @@ pub const SATURATED_DRIVE_RAD: f32 = 0.05;
 
 /// Whether [`Gains::for_vehicle`] turns the motor-lag watch on ([`Gains::lag_watch`]): on. It
 /// removes 19 of the 26 failing rows of the robustness matrix (docs/envelope.md, "The lag
-/// watch") for about 260 instructions a step (`firmware/report.sh`: 9,889 mean and 9,952 worst
+/// watch") for about 260 instructions a step (`firmware/report.sh`: 9,889 mean and 9,946 worst
 /// of the 10,000 budget).
 pub const LAG_WATCH: bool = true;
 
@@ -413,5 +413,35 @@ impl Gains {
             velocity_consistency_tau_s: 0.0,
             lag_watch: false,
         }
+    }
+}
+
+/// The attitude design's effective lag for a motor lag τ_m ([`Gains::for_vehicle`]):
+/// min(τ_m, [`LAG_TARGET_S`]) + [`SENSOR_DELAY_S`].
+fn design_lag_s(tau_m: f32) -> f32 {
+    let t = if tau_m > 0.0 { tau_m } else { 0.0 };
+    (if t < LAG_TARGET_S { t } else { LAG_TARGET_S }) + SENSOR_DELAY_S
+}
+
+impl Gains {
+    /// These gains redesigned from motor lag `from_s` to `to_s` (s), as [`Gains::for_vehicle`]
+    /// designs them: k_ω ∝ 1 / τ_e and k_R ∝ 1 / τ_e², the lead to [`LAG_TARGET_S`] and the
+    /// composite law's prediction on `to_s`.
+    pub fn with_motor_lag(mut self, from_s: f32, to_s: f32) -> Self {
+        let s = design_lag_s(from_s) / design_lag_s(to_s);
+        if s.is_finite() && s > 0.0 {
+            self.k_w *= s;
+            self.k_r *= s * s;
+        }
+        self.lag = if to_s > LAG_TARGET_S {
+            LagCompensation {
+                motor_tau_s: to_s,
+                target_tau_s: LAG_TARGET_S,
+            }
+        } else {
+            LagCompensation::OFF
+        };
+        self.composite.motor_tau_s = to_s;
+        self
     }
 }

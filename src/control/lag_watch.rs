@@ -434,36 +434,6 @@ impl LagWatch {
     }
 }
 
-/// The attitude design's effective lag for a motor lag τ_m ([`Gains::for_vehicle`]):
-/// min(τ_m, [`LAG_TARGET_S`]) + [`SENSOR_DELAY_S`].
-fn design_lag_s(tau_m: f32) -> f32 {
-    let t = if tau_m > 0.0 { tau_m } else { 0.0 };
-    (if t < LAG_TARGET_S { t } else { LAG_TARGET_S }) + SENSOR_DELAY_S
-}
-
-impl Gains {
-    /// These gains redesigned from motor lag `from_s` to `to_s` (s), as [`Gains::for_vehicle`]
-    /// designs them: k_ω ∝ 1 / τ_e and k_R ∝ 1 / τ_e², the lead to [`LAG_TARGET_S`] and the
-    /// composite law's prediction on `to_s`.
-    pub fn with_motor_lag(mut self, from_s: f32, to_s: f32) -> Self {
-        let s = design_lag_s(from_s) / design_lag_s(to_s);
-        if s.is_finite() && s > 0.0 {
-            self.k_w *= s;
-            self.k_r *= s * s;
-        }
-        self.lag = if to_s > LAG_TARGET_S {
-            LagCompensation {
-                motor_tau_s: to_s,
-                target_tau_s: LAG_TARGET_S,
-            }
-        } else {
-            LagCompensation::OFF
-        };
-        self.composite.motor_tau_s = to_s;
-        self
-    }
-}
-
 impl<M: HamiltonianModel> FlightController<M> {
     /// The motor lag the attitude loop is designed for now (s): the gains' own unless the lag
     /// watch ([`Gains::lag_watch`]) has switched.
