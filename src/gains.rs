@@ -109,6 +109,19 @@ impl LagCompensation {
         target_tau_s: 0.0,
     };
 
+    /// The compensation [`Gains::for_vehicle`] designs for a motor lag `motor_tau_s` (s): down
+    /// to [`LAG_TARGET_S`] when slower than it, off otherwise.
+    pub fn for_motor_lag(motor_tau_s: f32) -> Self {
+        if motor_tau_s > LAG_TARGET_S {
+            Self {
+                motor_tau_s,
+                target_tau_s: LAG_TARGET_S,
+            }
+        } else {
+            Self::OFF
+        }
+    }
+
     /// The lead ratio τ_m / τ_t, or `None` when off (or not a finite ratio above 1).
     pub fn ratio(&self) -> Option<f32> {
         let r = self.motor_tau_s / self.target_tau_s;
@@ -314,16 +327,9 @@ impl Gains {
             0.0
         };
         g.composite.motor_tau_s = tau_m;
-        g.lag = if tau_m > LAG_TARGET_S {
-            LagCompensation {
-                motor_tau_s: tau_m,
-                target_tau_s: LAG_TARGET_S,
-            }
-        } else {
-            LagCompensation::OFF
-        };
+        g.lag = LagCompensation::for_motor_lag(tau_m);
         g.velocity_consistency_tau_s = VELOCITY_CONSISTENCY_TAU_S;
-        let tau_e = tau_m.min(LAG_TARGET_S) + SENSOR_DELAY_S;
+        let tau_e = design_lag_s(tau_m);
         let j = facts.inertia_kg_m2.x.min(facts.inertia_kg_m2.y);
         let wc = 1.0 / (ATTITUDE_SPACING * tau_e);
         if j.is_finite() && j > 0.0 {
@@ -433,14 +439,7 @@ impl Gains {
             self.k_w *= s;
             self.k_r *= s * s;
         }
-        self.lag = if to_s > LAG_TARGET_S {
-            LagCompensation {
-                motor_tau_s: to_s,
-                target_tau_s: LAG_TARGET_S,
-            }
-        } else {
-            LagCompensation::OFF
-        };
+        self.lag = LagCompensation::for_motor_lag(to_s);
         self.composite.motor_tau_s = to_s;
         self
     }
