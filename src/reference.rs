@@ -102,8 +102,8 @@ impl TiltLimit {
 ///
 /// b₃* = F/‖F‖ (tilted at most `tilt.max_rad` from world z; a force with no upward component
 /// gives b₃* = e₃), b₁c = [cos ψ*, sin ψ*, 0], b₂* = b₃* × b₁c / ‖·‖, b₁* = b₂* × b₃*. The rates
-/// differentiate these products exactly given Ḟ; while the tilt limit is active ḃ₃* is taken as
-/// zero.
+/// differentiate these products exactly given Ḟ; while the tilt limit is active b₃* stays on the
+/// cone and ḃ₃* is the turn of F's horizontal direction alone.
 pub fn desired_attitude(
     f_w: &Vector3<f32>,
     f_dot_w: &Vector3<f32>,
@@ -124,9 +124,20 @@ pub fn desired_attitude(
         } else {
             let horiz = Vector3::new(b3.x, b3.y, 0.0);
             let hn = crate::fpu::sqrt(horiz.norm_squared());
-            let dir = if hn > 1e-9 { horiz / hn } else { Vector3::x() };
-            let b3 = e3 * cos_max + dir * tilt.sin;
-            (b3, Vector3::zeros(), true)
+            if hn > 1e-9 {
+                // On the cone b₃* = e₃ cos θ + d sin θ turns with the horizontal direction d of
+                // F alone: ḋ = (Ḟ_h − d (d·Ḟ_h)) / ‖F_h‖.
+                let dir = horiz / hn;
+                let fh_dot = Vector3::new(f_dot_w.x, f_dot_w.y, 0.0);
+                let d_dot = (fh_dot - dir * dir.dot(&fh_dot)) / (hn * n);
+                (e3 * cos_max + dir * tilt.sin, d_dot * tilt.sin, true)
+            } else {
+                (
+                    e3 * cos_max + Vector3::x() * tilt.sin,
+                    Vector3::zeros(),
+                    true,
+                )
+            }
         }
     };
     let (s, c) = sin_cos(yaw_rad);

@@ -11,7 +11,8 @@
 //! errors whatever their cause. A 0.5 m step makes e_p ≈ 0.5 m for a second, which the law reads
 //! as a disturbance and winds a up; unwinding takes seconds (`step`: 0.51 cm RMSE over t ≥ 5 s,
 //! against 0.0015 cm for the geometric controller without adaptation). Guards, for both laws:
-//! - the projection ‖a‖ ≤ a_max, and, while the mixer saturates, the drives clipped to
+//! - the projection ‖a‖ ≤ a_max, and, while the mixer saturates or the tilt limit binds, the
+//!   drives clipped to
 //!   [`AdaptationRates::saturated_drive_m`] and [`AdaptationRates::saturated_drive_rad`]: an
 //!   unreachable demand is weak evidence about the disturbance, but a fault that keeps the mixer
 //!   saturated is a disturbance, and a law switched off for the saturation's length can stay

@@ -59,8 +59,12 @@ impl<M: HamiltonianModel> FlightController<M> {
         // Desired attitude from the force the law wants. Its rate Ḟ ≈ m p⃛*, and with the
         // composite law also minus the rate of the compensation R (W a)_v, so that the attitude
         // loop is told ahead how the thrust axis must turn to follow a changing disturbance.
+        // Plus the position feedback's own rate −k_p ė_p = −k_p R e_v. The velocity feedback's
+        // rate −k_v ė_v (Lee's geometric controller differentiates it through the model's
+        // acceleration) is left out: it led the 2× figure of eight by a further 25 % but cut
+        // the delay margin by a quarter (docs/envelope.md, "Aggressive paths").
         #[cfg_attr(not(feature = "composite"), allow(unused_mut))]
-        let mut f_dot = sp.j_m_s3 * m;
+        let mut f_dot = sp.j_m_s3 * m - r * (e_v * g.k_p);
         #[cfg(feature = "composite")]
         if g.adapt && g.law == AdaptationLaw::Composite && g.composite.feedforward_tau_s > 0.0 {
             let comp = r * wa_v;

@@ -6,7 +6,9 @@ use super::*;
 impl<M: HamiltonianModel> FlightController<M> {
     /// Adaptation (paper eq. geometric_adaptive_law, with the robust clipping of
     /// crate::adapt); the tracking term's drive is bounded while the mixer cannot deliver the
-    /// wrench ([`AdaptationRates::saturated`]), so the estimate neither winds up on an
+    /// wrench or the tilt limit binds ([`AdaptationRates::saturated`]: at the limit the path
+    /// asks for more than the law lets the body tilt, and the tracking error that follows is
+    /// no disturbance), so the estimate neither winds up on an
     /// unreachable demand nor stays frozen through a fault that keeps the mixer saturated. The composite law's
     /// prediction term compares with the wrench actually delivered, so it keeps running.
     #[inline(never)]
@@ -46,8 +48,9 @@ impl<M: HamiltonianModel> FlightController<M> {
                 .predict_step(&g.composite, g.rates.a_max, &x, dt_s);
         }
         if !self.shaper.freezes_adaptation() {
-            // Saturated: the drive bounded, not switched off (AdaptationRates::saturated).
-            let rates = if sat.roll_pitch || sat.thrust {
+            // Saturated or tilt-limited: the drive bounded, not switched off
+            // (AdaptationRates::saturated).
+            let rates = if sat.roll_pitch || sat.thrust || demand.tilt_limited {
                 g.rates.saturated()
             } else {
                 g.rates
