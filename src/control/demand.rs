@@ -62,7 +62,7 @@ impl<M: HamiltonianModel> FlightController<M> {
         // Plus the position feedback's own rate −k_p ė_p = −k_p R e_v. The velocity feedback's
         // rate −k_v ė_v (Lee's geometric controller differentiates it through the model's
         // acceleration) is left out: it led the 2× figure of eight by a further 25 % but cut
-        // the delay margin by a quarter (docs/envelope.md, "Aggressive paths").
+        // the median delay margin by a sixth, 24 to 20 ms (docs/envelope.md, "Aggressive paths").
         #[cfg_attr(not(feature = "composite"), allow(unused_mut))]
         let mut f_dot = sp.j_m_s3 * m - r * (e_v * g.k_p);
         #[cfg(feature = "composite")]
