@@ -1,14 +1,15 @@
-//! Closed-loop replay: a candidate plant (any scenario's vehicle) flown by the onboard
+//! Closed-loop replay: a candidate plant (any scenario's vehicle, or a blob's model:
+//! [`super::plant`]) flown by the onboard
 //! controller ([`crate::control::onboard`]) along a logged flight's reference, started from the
 //! logged state, and compared with what the vehicle flew. The controller is known, the reference
 //! is exogenous, so the plant that replays the logs best is the one the data pick (the indirect
 //! approach to closed-loop identification).
 
+use super::plant::Replayable;
 use crate::control::onboard::{Mellinger, OnboardConfig, OnboardLaw};
 use crate::io::{LoopFlight, MotorCommands, OnboardSetpoint, OnboardState};
 use crate::pipeline::onboard::replay::{active, lerp_state, setpoints, ReplayOptions};
 use crate::sim::plant::PlantState;
-use crate::sim::scenario::Scenario;
 use anyhow::{bail, Result};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
@@ -213,10 +214,10 @@ pub fn warm_ups(
 /// Flies `plant` from the logged state at row `k0` for `steps` rows under the controller along
 /// `sps` (the reference with its acceleration, [`setpoints`]). The controller first runs on the
 /// logged states of the `warmup_rows` flown rows before `k0`.
-pub fn fly(
+pub fn fly<P: Replayable + ?Sized>(
     f: &LoopFlight,
     sps: &[OnboardSetpoint],
-    plant: &Scenario,
+    plant: &P,
     cfg: &ReplayConfig,
     k0: usize,
     steps: usize,
@@ -226,25 +227,23 @@ pub fn fly(
 
 /// [`fly`] with the controller already warmed up at `k0` ([`warm_up`]).
 #[allow(clippy::needless_range_loop)] // rows index the log, the reference and the states together
-pub fn fly_warm(
+pub fn fly_warm<P: Replayable + ?Sized>(
     f: &LoopFlight,
     sps: &[OnboardSetpoint],
-    plant: &Scenario,
+    plant: &P,
     cfg: &ReplayConfig,
     mut law: Mellinger,
     k0: usize,
     steps: usize,
 ) -> Flown {
     let (sub, dt) = (cfg.options.substeps.max(1), dt_sub(f, cfg));
-    let mut p = plant.plant();
-    p.set_state(plant_state(&f.state[k0]));
     let measured = start_rpm(f, k0);
     let start_rpm = if measured.iter().all(|r| r.is_finite()) {
         measured
     } else {
         cfg.map.rpm(&f.cmd[k0])
     };
-    p.set_rotor_rpm(start_rpm);
+    let mut p = plant.start(plant_state(&f.state[k0]), start_rpm);
     let mut out = Flown {
         start: k0,
         ..Flown::default()
@@ -405,7 +404,7 @@ impl<'a> Warmed<'a> {
     }
 
     /// `plant`'s pooled errors over the windows.
-    pub fn score(&self, plant: &Scenario, cfg: &ReplayConfig) -> ErrorAcc {
+    pub fn score<P: Replayable + ?Sized>(&self, plant: &P, cfg: &ReplayConfig) -> ErrorAcc {
         let one = |w: &WarmedFlight| {
             let mut acc = ErrorAcc::default();
             for (k0, law) in w.starts.iter().zip(&w.laws) {
@@ -455,9 +454,9 @@ fn par_map<T: Sync + Copy, R: Send>(items: &[T], g: &(impl Fn(T) -> R + Sync)) -
 }
 
 /// `plant`'s pooled errors over `steps`-row windows every `stride` rows of `flights`.
-pub fn score_windows(
+pub fn score_windows<P: Replayable + ?Sized>(
     flights: &[&LoopFlight],
-    plant: &Scenario,
+    plant: &P,
     cfg: &ReplayConfig,
     steps: usize,
     stride: usize,

@@ -1,5 +1,6 @@
 //! `host-train replay`: closed-loop replay of logged flights. Each candidate plant (a
 //! scenario's vehicle: the rigid `bl-*`, the weak-torque `bl-real-*`, an identified `bl-id-*`)
+//! or a weight blob's learned model behind the motors, [`plant`])
 //! is flown by the reproduced onboard controller ([`crate::control::onboard`]) along the logged
 //! reference, from the logged state, in windows of 10 / 50 / 100 / 300 rows and over each
 //! flight's longest airborne stretch; the plant that replays the flights best is the reading
@@ -8,6 +9,7 @@
 
 pub mod closed_loop;
 pub mod identify;
+pub mod plant;
 pub mod plot;
 pub mod synthetic;
 
@@ -18,6 +20,7 @@ use crate::sim::scenario::Scenario;
 use anyhow::{bail, Context, Result};
 use closed_loop::{fly, longest_airborne, score_windows, ErrorAcc, ReplayConfig, RotorMap};
 use identify::{fit_loop, fit_open_loop, LoopFit, PlantTerms};
+use plant::{BlobPlant, Replayable};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -25,7 +28,7 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args, Debug, Clone)]
 #[command(after_help = "LOOPDIR holds train/*.csv and test/*.csv loop logs \
 (tools/benchmark/nanodrone.py --loop-out LOOPDIR). Every --plant is a scenario TOML whose vehicle \
-(and effects) is the plant; its trajectory is ignored. Each window starts from the logged state, \
+(and effects) is the plant; its trajectory is ignored. Every --plant-blob is a weight blob whose learned model is the plant (a = 0, its own input lags), fed the rotor speeds of the --blob-rotors vehicle's motors (their lag and limits, its thrust and drag coefficients). Each window starts from the logged state, \
 the controller having run on the logged states for --warmup rows so its integrators hold what \
 the vehicle's did; errors are against the logged states that follow. A replay that leaves the \
 log by more than 1 m has diverged and its remaining steps count at 1 m and 90 degrees. \
@@ -39,6 +42,14 @@ pub struct ReplayArgs {
     /// A candidate plant (scenario TOML); repeat for several.
     #[arg(long = "plant", value_name = "SCENARIO.toml")]
     pub plants: Vec<PathBuf>,
+    /// A weight blob whose learned model is a candidate plant (a = 0); repeat for several.
+    #[arg(long = "plant-blob", value_name = "FILE.hfw")]
+    pub blob_plants: Vec<PathBuf>,
+    /// The motors and rotors a blob plant is fed through (a scenario: its vehicle's
+    /// coefficients and speed limits, its `[effects] motor_tau_s`); default: the --fit base,
+    /// else the first --plant.
+    #[arg(long, value_name = "SCENARIO.toml")]
+    pub blob_rotors: Option<PathBuf>,
     /// The onboard controller's configuration (JSON, as `host-train onboard --fit --out`
     /// writes); default: the firmware 2025.09 defaults.
     #[arg(long, value_name = "FILE.json")]
@@ -155,9 +166,9 @@ fn read_split(dir: &Path, split: &str) -> Result<Vec<LoopFlight>> {
 
 /// Scores `plant` on `flights`: windows of each length and each flight's airborne stretch
 /// (whose replayed states are returned for the figures).
-pub fn score_plant(
+pub fn score_plant<P: Replayable + ?Sized>(
     flights: &[&LoopFlight],
-    plant: &Scenario,
+    plant: &P,
     cfg: &ReplayConfig,
     lengths: &[usize],
     stride: usize,
@@ -203,8 +214,15 @@ pub fn score_plant(
 /// # Errors
 /// Unreadable logs, plants or configuration; no plant; a zero window; a failure writing.
 pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
-    if args.plants.is_empty() && args.fit.is_none() {
-        bail!("give at least one --plant SCENARIO.toml (or --fit BASE.toml)");
+    if args.plants.is_empty() && args.blob_plants.is_empty() && args.fit.is_none() {
+        bail!("give at least one --plant SCENARIO.toml, --plant-blob FILE.hfw or --fit BASE.toml");
+    }
+    if !args.blob_plants.is_empty()
+        && args.blob_rotors.is_none()
+        && args.fit.is_none()
+        && args.plants.is_empty()
+    {
+        bail!("--plant-blob needs the motors it is fed through: give --blob-rotors SCENARIO.toml (e.g. scenarios/bl-calm-spiral.toml), --fit or a --plant");
     }
     if args.windows.contains(&0) || args.stride == 0 || args.fit_steps == 0 || args.accel_span == 0
     {
@@ -232,16 +250,36 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
         },
         warmup_rows: args.warmup,
     };
-    let mut plants: Vec<(String, Scenario)> = Vec::new();
+    let mut plants: Vec<(String, Box<dyn Replayable>)> = Vec::new();
+    let mut first_vehicle = None;
     for p in &args.plants {
         let s = Scenario::load(p).with_context(|| format!("loading plant {}", p.display()))?;
-        plants.push((s.name.clone(), s));
+        first_vehicle.get_or_insert_with(|| s.clone());
+        plants.push((s.name.clone(), Box::new(s)));
     }
-    let base_for_open = match (&args.fit, plants.first()) {
-        (Some(p), _) => Scenario::load(p).with_context(|| format!("loading {}", p.display()))?,
-        (None, Some((_, s))) => s.clone(),
-        (None, None) => bail!("no plant"),
+    let base_for_open = match (&args.fit, &first_vehicle, &args.blob_rotors) {
+        (Some(p), _, _) => Scenario::load(p).with_context(|| format!("loading {}", p.display()))?,
+        (None, Some(s), _) => s.clone(),
+        (None, None, Some(p)) => {
+            Scenario::load(p).with_context(|| format!("loading {}", p.display()))?
+        }
+        (None, None, None) => bail!("no plant"),
     };
+    let rotors = match &args.blob_rotors {
+        Some(p) => Scenario::load(p).with_context(|| format!("loading {}", p.display()))?,
+        None => base_for_open.clone(),
+    };
+    for p in &args.blob_plants {
+        let model = crate::control::load_learned(p)?;
+        let stem = p.file_stem().map_or_else(
+            || p.display().to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        plants.push((
+            format!("blob {stem}"),
+            Box::new(BlobPlant::new(model, &rotors)),
+        ));
+    }
     let open_loop = fit_open_loop(&train_refs, &base_for_open);
     eprintln!(
         "open-loop torque gains (train): {:.3} / {:.3} / {:.3}, flapping {:.3} rad/s² per m/s",
@@ -274,7 +312,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
             r.objective,
             r.evaluations
         );
-        plants.push(("identified".into(), r.terms.apply(&base_for_open)));
+        plants.push(("identified".into(), Box::new(r.terms.apply(&base_for_open))));
         loop_fit = Some(r);
     }
     let test = if args.test {
@@ -292,7 +330,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
         for (name, plant) in &plants {
             eprintln!("replaying {name} on {} {split} flights…", flights.len());
             let (windows, rows, flown) =
-                score_plant(flights, plant, &cfg, &args.windows, args.stride);
+                score_plant(flights, plant.as_ref(), &cfg, &args.windows, args.stride);
             for w in &windows {
                 eprintln!(
                     "  {split} {name} {:>4} rows: position {:.4} m, attitude {:.4} rad, {} windows, {} diverged",
