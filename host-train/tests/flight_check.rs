@@ -191,3 +191,25 @@ fn untaught_feature_directions_are_backed_off_to_the_nominal_ones() {
 /// The steepness of the hidden layers and the size of the output layer's attitude dependence.
 const HIDDEN_AMP: f32 = 2.0;
 const OUTPUT_AMP: f32 = 2.0;
+
+/// `train --flight-survive` with a scenario that does not load fails before training starts
+/// (not after minutes of it), names the option and the file, and writes nothing.
+#[test]
+fn a_missing_survive_scenario_fails_before_training() {
+    let dir = std::env::temp_dir().join("hamflight-survive-missing");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let out = dir.join("out.hfw");
+    let cfg = host_train::train::TrainConfig {
+        flight_survive: vec![dir.join("no-such-scenario.toml")],
+        ..Default::default()
+    };
+    let err = host_train::pipeline::run_train(&cfg, &dir.join("no-dataset"), &out, true)
+        .expect_err("a missing scenario must fail");
+    let msg = format!("{err:#}");
+    assert!(
+        msg.contains("--flight-survive") && msg.contains("no-such-scenario.toml"),
+        "the error names the option and the file: {msg}"
+    );
+    assert!(!out.exists(), "nothing is written");
+}

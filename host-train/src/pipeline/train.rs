@@ -2,9 +2,11 @@
 //! then the blob and its report.
 
 use super::check::{require, run_model as run_check, CHECK_SCENARIOS};
+use super::prior_check;
+use crate::sim::scenario::Scenario;
 use crate::train::export;
 use crate::train::{self as training, backoff, TrainArgs, TrainConfig, TrainReport};
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use std::path::Path;
 
 /// Trains on the dataset in `data_dir`, flies the flight check (unless `cfg.flight_check` is
@@ -15,6 +17,12 @@ use std::path::Path;
 /// # Errors
 /// As [`training::fit`]; a failed flight check ([`require`]); a failure writing the outputs.
 pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Result<TrainReport> {
+    // The scenarios to survive load before training, so a bad path fails in a second.
+    let survive = cfg
+        .flight_survive
+        .iter()
+        .map(|p| Scenario::load(p).with_context(|| format!("--flight-survive {}", p.display())))
+        .collect::<Result<Vec<_>>>()?;
     let fitted = training::fit(cfg, data_dir, quiet)?;
     let mut report = fitted.report;
     let mut model = fitted.model;
@@ -30,13 +38,40 @@ pub fn run(cfg: &TrainConfig, data_dir: &Path, out: &Path, quiet: bool) -> Resul
         for (k, c) in tries.iter().enumerate() {
             let mut candidate = fitted.model;
             candidate.weights = c.weights;
-            let check = if k + 1 == tries.len() {
+            let last = k + 1 == tries.len();
+            let check = if last {
                 // The last try's failure is the error, with what to do about it.
                 require(&candidate, mass, vehicle)?
             } else {
                 run_check(&candidate, mass, vehicle)?
             };
-            if let Some(why) = check.failure.clone() {
+            let why = match check.failure.clone() {
+                Some(why) => Some(why),
+                None if !survive.is_empty() => {
+                    let s = prior_check::run_with_safety(&candidate, &[], &survive)?;
+                    if s.failure.is_none() && !quiet {
+                        for f in &s.flights {
+                            eprintln!(
+                                "flight-survive: {} law on {}: {}",
+                                f.law,
+                                f.scenario,
+                                f.rmse_m
+                                    .map_or("no RMSE".into(), |m| format!("{:.3} cm", 100.0 * m))
+                            );
+                        }
+                    }
+                    s.failure
+                }
+                None => None,
+            };
+            if let Some(why) = why {
+                if last && check.failure.is_none() {
+                    bail!(
+                        "flight check failed: {why}. Nothing was written. No feature back-off \
+                         flies every --flight-survive scenario: check that they describe the \
+                         vehicle the flights came from, or train on more varied flights"
+                    );
+                }
                 report.features.failed.push((c.excited_dims, c.kept, why));
                 continue;
             }

@@ -174,6 +174,10 @@ pub struct TrainConfig {
     /// and write the first blob that flies, saying so (default true); off, a failed check
     /// writes nothing.
     pub feature_backoff: bool,
+    /// Scenarios the blob must also fly under both laws without a crash, full length (e.g.
+    /// the plant the closed-loop replay identifies, and the rigid published one): a candidate
+    /// that crashes one fails the check like the built-in flights, and the back-off goes on.
+    pub flight_survive: Vec<std::path::PathBuf>,
     /// The motors' first-order time constant (s) written into the blob, what the composite
     /// law's prediction assumes; `None` (default) takes the manifest's `vehicle.motor_tau_s`
     /// (`import --motor-tau-s`), else [`hamflight::model::DEFAULT_MOTOR_TAU_S`].
@@ -218,6 +222,7 @@ impl Default for TrainConfig {
             feature_epochs: 12,
             flight_check: true,
             feature_backoff: true,
+            flight_survive: Vec::new(),
             motor_tau_s: None,
             zero_unactuated_gain_rows: true,
             pin_rigid_body: false,
@@ -414,6 +419,13 @@ pub struct TrainArgs {
     /// chases the untaught rest.
     #[arg(long)]
     pub no_feature_backoff: bool,
+    /// A scenario the blob must also fly, full length, under both laws without a crash
+    /// (repeatable): e.g. scenarios/bl-id-calm-spiral.toml, the vehicle the closed-loop replay
+    /// identifies from the flights, and scenarios/bl-calm-spiral.toml, the rigid published one.
+    /// A learned W that crashes one goes through the same back-off; the error names the
+    /// scenario and the law.
+    #[arg(long = "flight-survive", value_name = "FILE.toml")]
+    pub flight_survive: Vec<std::path::PathBuf>,
     /// The motors' first-order time constant (s) written into the blob, what the composite
     /// adaptation law's prediction assumes. Default: the manifest's `vehicle.motor_tau_s` (what
     /// `import --motor-tau-s` was told), else 0.05 s.
@@ -473,6 +485,7 @@ impl Default for TrainArgs {
             no_flight_rotor_gains: false,
             no_flight_check: false,
             no_feature_backoff: false,
+            flight_survive: Vec::new(),
             motor_tau_s: None,
             free_gain: false,
             pin_rigid_body: false,
@@ -507,6 +520,7 @@ impl TrainArgs {
             feature_epochs: self.feature_epochs,
             flight_check: !self.no_flight_check,
             feature_backoff: !self.no_feature_backoff,
+            flight_survive: self.flight_survive.clone(),
             motor_tau_s: self.motor_tau_s,
             zero_unactuated_gain_rows: !self.free_gain,
             pin_rigid_body: self.pin_rigid_body,
