@@ -9,10 +9,9 @@
 use hamflight::model::{LearnedModel, ModelWeights, PortTerms};
 use host_train::control::OnboardConfig;
 use host_train::io::LoopFlight;
-use host_train::pipeline::replay::plant::BlobPlant;
 use host_train::pipeline::{
-    fly_log, score_windows, AccelSource, PlantTerms, ReplayConfig, ReplayOptions, SyntheticLog,
-    BENCHMARK_MAP,
+    fly_log, score_windows, AccelSource, BlobPlant, PlantTerms, ReplayConfig, ReplayOptions,
+    Replayable, SyntheticLog, BENCHMARK_MAP,
 };
 use host_train::sim::Trajectory;
 use host_train::Scenario;
@@ -91,9 +90,7 @@ fn a_blob_plant_replays_like_the_vehicle_it_describes() {
     };
     let (rigid_log, weak_log) = (log_of(&RIGID, 1), log_of(&WEAK, 2));
     let c = cfg();
-    let e = |f: &LoopFlight, p: &dyn host_train::pipeline::replay::plant::Replayable| {
-        score_windows(&[f], p, &c, 100, 100).pos_rmse_m()
-    };
+    let e = |f: &LoopFlight, p: &dyn Replayable| score_windows(&[f], p, &c, 100, 100).pos_rmse_m();
     let (rigid_blob, weak_blob) = (blob([1.0; 3]), blob([0.3, 0.3, 1.0]));
     let scenario_rigid = e(&rigid_log, &RIGID.apply(&base()));
     let (rr, rw) = (e(&rigid_log, &rigid_blob), e(&rigid_log, &weak_blob));

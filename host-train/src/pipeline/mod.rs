@@ -33,6 +33,7 @@ pub use onboard::replay::{AccelSource, ReplayOptions};
 pub use prior_check::{prior_of, run as run_prior_check, run_with_safety as run_safety_check};
 pub use replay::closed_loop::{score_windows, ReplayConfig, RotorMap};
 pub use replay::identify::{fit_loop, fit_open_loop, PlantTerms};
+pub use replay::plant::{BlobPlant, Replayable, Stepper};
 pub use replay::synthetic::{fly_log, SyntheticLog, BENCHMARK_MAP};
 pub use robustness::{
     fly_cell as fly_robustness_cell, fly_cell_watched as fly_robustness_cell_watched,
