@@ -6,62 +6,24 @@
 //!
 //! `cargo test --release -p host-train --test blob_plant -- --nocapture`
 
-use hamflight::model::{LearnedModel, ModelWeights, PortTerms};
-use host_train::control::OnboardConfig;
-use host_train::io::LoopFlight;
-use host_train::pipeline::{
-    fly_log, score_windows, AccelSource, BlobPlant, PlantTerms, ReplayConfig, ReplayOptions,
-    Replayable, SyntheticLog, BENCHMARK_MAP,
-};
-use host_train::sim::Trajectory;
-use host_train::Scenario;
+mod loop_common;
 
-/// The benchmark's vehicle on a brisk diamond (as `closed_loop_id.rs` flies it), without the
-/// rotor drag a blob's model does not carry: the rigid blob then describes the vehicle exactly.
+use hamflight::model::{LearnedModel, ModelWeights, PortTerms};
+use host_train::io::LoopFlight;
+use host_train::pipeline::{score_windows, BlobPlant, PlantTerms, Replayable, BENCHMARK_MAP};
+use host_train::Scenario;
+use loop_common::{diamond_base, replay_cfg};
+
+/// The benchmark's vehicle on the brisk diamond, without the rotor drag a blob's model does not
+/// carry: the rigid blob then describes the vehicle exactly.
 fn base() -> Scenario {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let mut s = Scenario::load(root.join("scenarios/bl-calm-spiral.toml")).expect("base scenario");
-    s.spec.trajectory = Trajectory::Diamond {
-        waypoints_m: vec![
-            [0.0, 0.0, 0.6],
-            [0.5, 0.3, 0.8],
-            [0.0, 0.6, 0.6],
-            [-0.5, 0.3, 0.4],
-        ],
-        segment_s: 1.5,
-        hold_s: 0.0,
-    };
+    let mut s = diamond_base();
     s.spec.effects.rotor_drag = false;
     s
 }
 
-fn cfg() -> ReplayConfig {
-    ReplayConfig {
-        controller: OnboardConfig::cf21bl_2025_09(),
-        map: BENCHMARK_MAP,
-        options: ReplayOptions {
-            substeps: 5,
-            accel: AccelSource::Diff,
-            accel_span: 1,
-            smooth_rows: 0,
-        },
-        warmup_rows: 100_000,
-    }
-}
-
 fn log_of(truth: &PlantTerms, seed: u64) -> LoopFlight {
-    let opt = SyntheticLog {
-        duration_s: 20.0,
-        rpm_noise_frac: 0.05,
-        seed,
-        ..SyntheticLog::default()
-    };
-    fly_log(
-        &truth.apply(&base()),
-        &OnboardConfig::cf21bl_2025_09(),
-        &BENCHMARK_MAP,
-        &opt,
-    )
+    loop_common::log_of(&base(), truth, seed)
 }
 
 /// The untrained prior on the base vehicle's mass and inertia, with torque gains `gain`.
@@ -89,7 +51,7 @@ fn a_blob_plant_replays_like_the_vehicle_it_describes() {
         flap_rad_s2_per_m_s: 0.0,
     };
     let (rigid_log, weak_log) = (log_of(&RIGID, 1), log_of(&WEAK, 2));
-    let c = cfg();
+    let c = replay_cfg(BENCHMARK_MAP);
     let e = |f: &LoopFlight, p: &dyn Replayable| score_windows(&[f], p, &c, 100, 100).pos_rmse_m();
     let (rigid_blob, weak_blob) = (blob([1.0; 3]), blob([0.3, 0.3, 1.0]));
     let scenario_rigid = e(&rigid_log, &RIGID.apply(&base()));

@@ -6,71 +6,19 @@
 //!
 //! `cargo test --release -p host-train --test closed_loop_id -- --nocapture`
 
-use host_train::control::OnboardConfig;
+mod loop_common;
+
 use host_train::io::LoopFlight;
-use host_train::pipeline::{
-    fit_loop, fit_open_loop, fly_log, score_windows, AccelSource, PlantTerms, ReplayConfig,
-    ReplayOptions, RotorMap, SyntheticLog, BENCHMARK_MAP,
-};
-use host_train::sim::Trajectory;
+use host_train::pipeline::{fit_loop, fit_open_loop, score_windows, PlantTerms, BENCHMARK_MAP};
 use host_train::Scenario;
+use loop_common::{diamond_base, replay_cfg as cfg};
 
-/// Legs of 1.5 s: brisk (about 0.5 m/s, 1.5 m/s²) yet short of saturating the motors, where a
-/// 100 Hz log no longer pins the controller down between rows.
-const SEGMENT_S: f64 = 1.5;
-
-const BASE: &str = "scenarios/bl-calm-spiral.toml";
-
-/// The benchmark's vehicle flying a brisk diamond: the benchmark's references move 0.3-0.5 m
-/// with speeds near 1 m/s, which a slow circle does not (the controller then cancels any
-/// torque gain and the logs cannot tell plants apart).
 fn base() -> Scenario {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let mut s = Scenario::load(root.join(BASE)).expect("loading the base scenario");
-    s.spec.trajectory = Trajectory::Diamond {
-        waypoints_m: vec![
-            [0.0, 0.0, 0.6],
-            [0.5, 0.3, 0.8],
-            [0.0, 0.6, 0.6],
-            [-0.5, 0.3, 0.4],
-        ],
-        segment_s: SEGMENT_S,
-        hold_s: 0.0,
-    };
-    s
+    diamond_base()
 }
 
-fn cfg(map: RotorMap) -> ReplayConfig {
-    ReplayConfig {
-        controller: OnboardConfig::cf21bl_2025_09(),
-        map,
-        options: ReplayOptions {
-            substeps: 5,
-            accel: AccelSource::Diff,
-            // The synthetic log's reference velocity is exact, so the tightest difference is
-            // the acceleration the vehicle flew (the real logs' want ±10 rows: `--accel-span`).
-            accel_span: 1,
-            smooth_rows: 0,
-        },
-        // From the start of the flight: the position integrators hold the whole flight.
-        warmup_rows: 100_000,
-    }
-}
-
-/// A log of `truth` on `base`, flown by the onboard controller, speeds with 5 % noise.
 fn log_of(truth: &PlantTerms, seed: u64) -> LoopFlight {
-    let opt = SyntheticLog {
-        duration_s: 20.0,
-        rpm_noise_frac: 0.05,
-        seed,
-        ..SyntheticLog::default()
-    };
-    fly_log(
-        &truth.apply(&base()),
-        &OnboardConfig::cf21bl_2025_09(),
-        &BENCHMARK_MAP,
-        &opt,
-    )
+    loop_common::log_of(&base(), truth, seed)
 }
 
 fn pos_rmse(f: &LoopFlight, plant: &PlantTerms) -> f64 {

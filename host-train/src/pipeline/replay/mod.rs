@@ -1,5 +1,5 @@
 //! `host-train replay`: closed-loop replay of logged flights. Each candidate plant (a
-//! scenario's vehicle: the rigid `bl-*`, the weak-torque `bl-real-*`, an identified `bl-id-*`)
+//! scenario's vehicle: the rigid `bl-*`, the weak-torque `bl-real-*`, an identified `bl-id-*`;
 //! or a weight blob's learned model behind the motors, [`plant`])
 //! is flown by the reproduced onboard controller ([`crate::control::onboard`]) along the logged
 //! reference, from the logged state, in windows of 10 / 50 / 100 / 300 rows and over each
@@ -28,7 +28,10 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args, Debug, Clone)]
 #[command(after_help = "LOOPDIR holds train/*.csv and test/*.csv loop logs \
 (tools/benchmark/nanodrone.py --loop-out LOOPDIR). Every --plant is a scenario TOML whose vehicle \
-(and effects) is the plant; its trajectory is ignored. Every --plant-blob is a weight blob whose learned model is the plant (a = 0, its own input lags), fed the rotor speeds of the --blob-rotors vehicle's motors (their lag and limits, its thrust and drag coefficients). Each window starts from the logged state, \
+(and effects) is the plant; its trajectory is ignored. Every --plant-blob is a weight blob whose \
+learned model is the plant (a = 0, its own input lags), fed the rotor speeds of the --blob-rotors \
+vehicle's motors (their lag and limits, its thrust and drag coefficients). Each window starts \
+from the logged state, \
 the controller having run on the logged states for --warmup rows so its integrators hold what \
 the vehicle's did; errors are against the logged states that follow. A replay that leaves the \
 log by more than 1 m has diverged and its remaining steps count at 1 m and 90 degrees. \
@@ -251,24 +254,26 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayReport> {
         warmup_rows: args.warmup,
     };
     let mut plants: Vec<(String, Box<dyn Replayable>)> = Vec::new();
+    let load = |p: &Path, what: &str| {
+        Scenario::load(p).with_context(|| format!("loading {what} {}", p.display()))
+    };
     let mut first_vehicle = None;
     for p in &args.plants {
-        let s = Scenario::load(p).with_context(|| format!("loading plant {}", p.display()))?;
+        let s = load(p, "plant")?;
         first_vehicle.get_or_insert_with(|| s.clone());
         plants.push((s.name.clone(), Box::new(s)));
     }
-    let base_for_open = match (&args.fit, &first_vehicle, &args.blob_rotors) {
-        (Some(p), _, _) => Scenario::load(p).with_context(|| format!("loading {}", p.display()))?,
-        (None, Some(s), _) => s.clone(),
-        (None, None, Some(p)) => {
-            Scenario::load(p).with_context(|| format!("loading {}", p.display()))?
-        }
+    let blob_rotors = match &args.blob_rotors {
+        Some(p) => Some(load(p, "--blob-rotors")?),
+        None => None,
+    };
+    let base_for_open = match (&args.fit, first_vehicle, &blob_rotors) {
+        (Some(p), _, _) => load(p, "--fit base")?,
+        (None, Some(s), _) => s,
+        (None, None, Some(r)) => r.clone(),
         (None, None, None) => bail!("no plant"),
     };
-    let rotors = match &args.blob_rotors {
-        Some(p) => Scenario::load(p).with_context(|| format!("loading {}", p.display()))?,
-        None => base_for_open.clone(),
-    };
+    let rotors = blob_rotors.unwrap_or_else(|| base_for_open.clone());
     for p in &args.blob_plants {
         let model = crate::control::load_learned(p)?;
         let stem = p.file_stem().map_or_else(
