@@ -251,3 +251,53 @@ fn the_torque_gain_prior_pulls_toward_the_description_in_proportion_to_its_weigh
         assert!(m > w && m < s, "gain {m:.3} not between {w:.3} and {s:.3}");
     }
 }
+
+#[test]
+fn a_pinned_torque_lag_stays_at_zero_and_a_lagged_truth_is_then_missed() {
+    let base = base_model();
+    let scaling = Scaling::of(&base);
+    let mut p_true = truth_params();
+    p_true[1..4].copy_from_slice(&[1.0, 1.0, 1.0]);
+    // A vehicle whose torques act without a lag behind the rotors: pinning the lag costs nothing.
+    p_true[5] = 0.0;
+    let fit = |truth_params: &[f64], seed: u64| {
+        let truth = base.with_port(scaling.to_port(truth_params));
+        let data = synthetic(&truth, 80, seed);
+        let ids: Vec<usize> = (0..data.windows.len()).collect();
+        let mut cfg = PortFitConfig {
+            iterations: 30,
+            ..PortFitConfig::default()
+        };
+        cfg.structure.torque_gains = false;
+        cfg.structure.torque_lag = false;
+        let start = default_port_start(&cfg.structure);
+        assert_eq!(start.torque_lag_s, 0.0, "a pinned lag starts at zero");
+        let (fitted, steps) = fit_port(&base, &data, &ids, &start, &cfg, |_| {});
+        (scaling.to_params(fitted.port()), steps)
+    };
+    let (p_fit, steps) = fit(&p_true, 17);
+    assert_eq!(p_fit[5], 0.0, "the torque lag moved: {}", p_fit[5]);
+    for (name, i) in [
+        ("roll damping", 9),
+        ("flapping roll per v_y", 13),
+        ("tilt k11", 21),
+    ] {
+        let (t, f) = (p_true[i], p_fit[i]);
+        assert!(
+            (f - t).abs() <= 0.1 * t.abs(),
+            "{name}: fitted {f:.4}, true {t:.4}"
+        );
+    }
+    let cost_unlagged = steps.last().map(|s| s.cost).unwrap_or(f64::NAN);
+    // On a vehicle that does lag its torques, the pinned fit cannot follow: its cost stays
+    // higher (the structure is a choice the training flights must make, not a free lunch).
+    let mut lagged = p_true.clone();
+    lagged[5] = 0.04;
+    let (p_lag, steps_lag) = fit(&lagged, 17);
+    assert_eq!(p_lag[5], 0.0);
+    let cost_lagged = steps_lag.last().map(|s| s.cost).unwrap_or(f64::NAN);
+    assert!(
+        cost_lagged > 2.0 * cost_unlagged,
+        "pinned lag on a lagged truth: cost {cost_lagged} against {cost_unlagged}"
+    );
+}

@@ -49,17 +49,33 @@ pub struct FitPortArgs {
     /// Leave out the rotor drag.
     #[arg(long)]
     pub no_drag: bool,
+    /// Leave out the rate damping (on closed-loop flights it stands in, in part, for the
+    /// onboard attitude loop's effect, which the law then cancels on a vehicle that lacks it).
+    #[arg(long)]
+    pub no_rate_damping: bool,
     /// Hold the torques' effective gains at the starting blob's (the vehicle description's)
     /// instead of fitting them: flights flown in closed loop bias free torque gains toward zero
     /// (the onboard controller's torques cancel moments the model may not have), and a blob
     /// with such gains over-drives the real rotors.
     #[arg(long)]
     pub pin_torque_gains: bool,
+    /// Hold the torques' lag behind the rotors at zero instead of fitting it, so that the
+    /// blob's actuator chain is its motor lag alone (`--motor-tau-s`): on closed-loop flights
+    /// a fitted lag stands in for the moments the onboard controller cancels, and the law,
+    /// which designs its attitude loop and its lead for the chain's lag, over-compensates a
+    /// vehicle whose rotors are faster.
+    #[arg(long)]
+    pub pin_torque_lag: bool,
     /// Pull the free torque gains toward the vehicle description's 1 with this weight: the
     /// fit's cost (the mean scaled error norm) of a unit deviation per axis; 0 (the default):
     /// no prior. Between free gains (0) and pinned ones (--pin-torque-gains).
     #[arg(long, value_name = "W", default_value_t = 0.0)]
     pub torque_gain_prior: f64,
+    /// Pull the rate damping toward zero with this weight: the fit's cost of 1/s of damping per
+    /// axis; 0 (the default): no prior. Between a free damping (0) and none
+    /// (--no-rate-damping).
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub rate_damping_prior: f64,
     /// Leave out the flights whose file name (the imported log's, else the dataset's) starts
     /// with TYPE from the fit and score them (model selection on the training flights: leave
     /// one flight type out).
@@ -97,6 +113,8 @@ pub struct FitPortReport {
     pub structure: PortStructure,
     /// The torque gains' prior weight (`--torque-gain-prior`; 0: none).
     pub torque_gain_prior: f64,
+    /// The rate damping's prior weight (`--rate-damping-prior`; 0: none).
+    pub rate_damping_prior: f64,
     /// The starting blob.
     pub weights: String,
     /// The dataset.
@@ -185,8 +203,16 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         tilt: !args.no_tilt,
         gyrator: !args.no_gyrator,
         drag: !args.no_drag,
+        rate_damping: !args.no_rate_damping,
         torque_gains: !args.pin_torque_gains,
+        torque_lag: !args.pin_torque_lag,
     };
+    if !(args.rate_damping_prior.is_finite() && args.rate_damping_prior >= 0.0) {
+        bail!(
+            "--rate-damping-prior must be a finite weight ≥ 0, got {}",
+            args.rate_damping_prior
+        );
+    }
     if !(args.torque_gain_prior.is_finite() && args.torque_gain_prior >= 0.0) {
         bail!(
             "--torque-gain-prior must be a finite weight ≥ 0, got {}",
@@ -198,6 +224,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         scales,
         structure,
         torque_gain_prior: args.torque_gain_prior,
+        rate_damping_prior: args.rate_damping_prior,
         ..PortFitConfig::default()
     };
     if !args.quiet {
@@ -254,7 +281,8 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
             } else {
                 "The fitted terms make the vehicle of the check scenario fly worse than a blob \
                  that knows only its rigid body: fit with fewer terms (--no-tilt, \
-                 --no-gyrator), on more varied flights, or check that the scenario describes \
+                 --no-gyrator, --pin-torque-lag), pull the rate damping toward zero \
+                 (--rate-damping-prior W), on more varied flights, or check that the scenario describes \
                  the vehicle the flights came from"
             };
             bail!("flight check failed: {why}. Nothing was written. {advice}");
@@ -266,6 +294,7 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         port: port_fit::report(&model),
         structure,
         torque_gain_prior: args.torque_gain_prior,
+        rate_damping_prior: args.rate_damping_prior,
         weights: args.weights.display().to_string(),
         data: args.data.display().to_string(),
         hold_out: args.hold_out.clone(),

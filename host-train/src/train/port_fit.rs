@@ -45,10 +45,16 @@ pub struct PortStructure {
     pub gyrator: bool,
     /// The rotor drag D_v.
     pub drag: bool,
+    /// The rate damping D_ω.
+    pub rate_damping: bool,
     /// The torques' effective gains k_τ (else held at the starting blob's, the vehicle
     /// description's 1: on flights flown in closed loop, a moment the onboard controller
     /// cancels is correlated with its torque commands and biases free gains toward zero).
     pub torque_gains: bool,
+    /// The torques' first-order lag behind the rotors (else held at zero: the motors' own lag,
+    /// the blob's motor time constant, is then the whole actuator chain the law designs for;
+    /// a fitted lag adds to it, [`hamflight::gains::VehicleFacts::of`]).
+    pub torque_lag: bool,
 }
 
 impl Default for PortStructure {
@@ -57,7 +63,9 @@ impl Default for PortStructure {
             tilt: true,
             gyrator: true,
             drag: true,
+            rate_damping: true,
             torque_gains: true,
+            torque_lag: true,
         }
     }
 }
@@ -192,6 +200,10 @@ pub struct PortFitConfig {
     /// Flights flown in closed loop bias free gains toward zero (docs/benchmark.md "What the
     /// data identify"), and a blob whose gains are far below the rotors' over-drives them.
     pub torque_gain_prior: f64,
+    /// A prior pulling each free rate damping D_ω / J toward zero: the cost of 1/s of damping
+    /// per axis; 0: none. On closed-loop flights the damping stands in, in part, for the
+    /// onboard attitude loop, and the law cancels it on a vehicle that lacks it.
+    pub rate_damping_prior: f64,
 }
 
 impl Default for PortFitConfig {
@@ -202,6 +214,7 @@ impl Default for PortFitConfig {
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             structure: PortStructure::default(),
             torque_gain_prior: 0.0,
+            rate_damping_prior: 0.0,
         }
     }
 }
@@ -213,7 +226,9 @@ pub fn default_start(structure: &PortStructure) -> PortTerms {
     if structure.torque_gains {
         t.torque_gain_offset = [-0.9; 3];
     }
-    t.torque_lag_s = 0.05;
+    if structure.torque_lag {
+        t.torque_lag_s = 0.05;
+    }
     t
 }
 
@@ -235,7 +250,9 @@ pub fn fit(
                 || (!s.tilt && TILT.contains(&i))
                 || (!s.gyrator && GYRATOR.contains(&i))
                 || (!s.drag && DRAG.contains(&i))
+                || (!s.rate_damping && DAMPING.contains(&i))
                 || (!s.torque_gains && TORQUE_GAIN.contains(&i))
+                || (!s.torque_lag && i == TORQUE_LAG)
         })
         .collect();
     let project = |q: &mut [f64]| {
@@ -249,17 +266,21 @@ pub fn fit(
             }
         }
     };
-    let priors: Vec<Prior> = if s.torque_gains && cfg.torque_gain_prior > 0.0 {
-        TORQUE_GAIN
-            .map(|index| Prior {
-                index,
-                target: 1.0,
-                weight: cfg.torque_gain_prior,
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let mut priors: Vec<Prior> = Vec::new();
+    if s.torque_gains && cfg.torque_gain_prior > 0.0 {
+        priors.extend(TORQUE_GAIN.map(|index| Prior {
+            index,
+            target: 1.0,
+            weight: cfg.torque_gain_prior,
+        }));
+    }
+    if s.rate_damping && cfg.rate_damping_prior > 0.0 {
+        priors.extend(DAMPING.map(|index| Prior {
+            index,
+            target: 0.0,
+            weight: cfg.rate_damping_prior,
+        }));
+    }
     let roll = PortRoll { base, scaling };
     let problem = Problem {
         roll: &roll,
