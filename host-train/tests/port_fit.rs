@@ -105,6 +105,17 @@ fn synthetic(truth: &LearnedModel, n: usize, seed: u64) -> Windows {
     }
 }
 
+/// Each named scaled parameter `i` of the fit within 10 % of the truth's.
+fn assert_within_ten_percent(p_true: &[f64], p_fit: &[f64], terms: &[(&str, usize)]) {
+    for &(name, i) in terms {
+        let (t, f) = (p_true[i], p_fit[i]);
+        assert!(
+            (f - t).abs() <= 0.1 * t.abs(),
+            "{name}: fitted {f:.4}, true {t:.4}"
+        );
+    }
+}
+
 #[test]
 fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
     let base = base_model();
@@ -156,13 +167,7 @@ fn a_known_vehicle_is_recovered_within_ten_percent_per_term() {
         ("flapping pitch per v_x", 15),
     ]);
     checked.extend([("tilt k11", 21), ("tilt k22", 22)]);
-    for (name, i) in checked {
-        let (t, f) = (p_true[i], p_fit[i]);
-        assert!(
-            (f - t).abs() <= 0.1 * t.abs(),
-            "{name}: fitted {f:.4}, true {t:.4}"
-        );
-    }
+    assert_within_ten_percent(&p_true, &p_fit, &checked);
     // The terms the truth does not have stay small against the ones it has.
     for i in [12, 14, 16, 17, 18, 19, 20, 24, 25, 26] {
         assert!(p_fit[i].abs() < 0.5, "parameter {i}: {}", p_fit[i]);
@@ -200,18 +205,16 @@ fn pinned_torque_gains_stay_at_the_description_and_the_rest_is_recovered() {
     for (i, k) in p_fit.iter().enumerate().take(4).skip(1) {
         assert_eq!(*k, 1.0, "torque gain {i} moved: {k}");
     }
-    for (name, i) in [
-        ("torque lag", 5),
-        ("roll damping", 9),
-        ("flapping roll per v_y", 13),
-        ("tilt k11", 21),
-    ] {
-        let (t, f) = (p_true[i], p_fit[i]);
-        assert!(
-            (f - t).abs() <= 0.1 * t.abs(),
-            "{name}: fitted {f:.4}, true {t:.4}"
-        );
-    }
+    assert_within_ten_percent(
+        &p_true,
+        &p_fit,
+        &[
+            ("torque lag", 5),
+            ("roll damping", 9),
+            ("flapping roll per v_y", 13),
+            ("tilt k11", 21),
+        ],
+    );
 }
 
 #[test]
@@ -277,17 +280,15 @@ fn a_pinned_torque_lag_stays_at_zero_and_a_lagged_truth_is_then_missed() {
     };
     let (p_fit, steps) = fit(&p_true, 17);
     assert_eq!(p_fit[5], 0.0, "the torque lag moved: {}", p_fit[5]);
-    for (name, i) in [
-        ("roll damping", 9),
-        ("flapping roll per v_y", 13),
-        ("tilt k11", 21),
-    ] {
-        let (t, f) = (p_true[i], p_fit[i]);
-        assert!(
-            (f - t).abs() <= 0.1 * t.abs(),
-            "{name}: fitted {f:.4}, true {t:.4}"
-        );
-    }
+    assert_within_ten_percent(
+        &p_true,
+        &p_fit,
+        &[
+            ("roll damping", 9),
+            ("flapping roll per v_y", 13),
+            ("tilt k11", 21),
+        ],
+    );
     let cost_unlagged = steps.last().map(|s| s.cost).unwrap_or(f64::NAN);
     // On a vehicle that does lag its torques, the pinned fit cannot follow: its cost stays
     // higher (the structure is a choice the training flights must make, not a free lunch).

@@ -207,17 +207,13 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
         torque_gains: !args.pin_torque_gains,
         torque_lag: !args.pin_torque_lag,
     };
-    if !(args.rate_damping_prior.is_finite() && args.rate_damping_prior >= 0.0) {
-        bail!(
-            "--rate-damping-prior must be a finite weight ≥ 0, got {}",
-            args.rate_damping_prior
-        );
-    }
-    if !(args.torque_gain_prior.is_finite() && args.torque_gain_prior >= 0.0) {
-        bail!(
-            "--torque-gain-prior must be a finite weight ≥ 0, got {}",
-            args.torque_gain_prior
-        );
+    for (flag, w) in [
+        ("--torque-gain-prior", args.torque_gain_prior),
+        ("--rate-damping-prior", args.rate_damping_prior),
+    ] {
+        if !(w.is_finite() && w >= 0.0) {
+            bail!("{flag} must be a finite weight ≥ 0, got {w}");
+        }
     }
     let cfg = PortFitConfig {
         iterations: args.fit.iterations,
@@ -282,8 +278,8 @@ pub fn run(args: &FitPortArgs) -> Result<FitPortReport> {
                 "The fitted terms make the vehicle of the check scenario fly worse than a blob \
                  that knows only its rigid body: fit with fewer terms (--no-tilt, \
                  --no-gyrator, --pin-torque-lag), pull the rate damping toward zero \
-                 (--rate-damping-prior W), on more varied flights, or check that the scenario describes \
-                 the vehicle the flights came from"
+                 (--rate-damping-prior W), on more varied flights, or check that the \
+                 scenario describes the vehicle the flights came from"
             };
             bail!("flight check failed: {why}. Nothing was written. {advice}");
         }
