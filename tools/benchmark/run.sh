@@ -18,7 +18,7 @@
 # protocol-dataset/, model.hfw (free rotation), pinned.hfw (J and g pinned to the vehicle
 # description, W learned), flying.hfw (pinned.hfw with the port terms learned: the best
 # predictor, not for upload), upload.hfw (the port terms with the torque gains and lag pinned:
-# the blob to upload), upload-check.txt, response.json (the host-side measured-input response), score*/,
+# the blob to upload), upload-check.txt, loop/ and replay/ (the closed-loop replay), response.json (the host-side measured-input response), score*/,
 # reference_score*.json and the logs. Nothing is written into the repository.
 set -euo pipefail
 
@@ -54,7 +54,9 @@ fi
 echo "== 1. convert"
 # no --motor-tau-s: the CSVs carry MEASURED rotor speeds, which must not go through a motor lag again
 if [ -n "${NANODRONE_CHECKOUT:-}" ]; then src=(--checkout "$NANODRONE_CHECKOUT"); else src=(--git-dir "$GIT_DIR_NANO"); fi
-"$PY" "$here/nanodrone.py" "${src[@]}" --commit "$COMMIT" --out "$work/csv" | tee "$work/convert.log"
+# --loop-out: the closed-loop logs (reference, logged state, motor commands) for step 4g's replay.
+"$PY" "$here/nanodrone.py" "${src[@]}" --commit "$COMMIT" --out "$work/csv" --loop-out "$work/loop" \
+    | tee "$work/convert.log"
 
 echo "== 2. reference score (Python, no training)"
 "$PY" "$here/reference_score.py" --csv "$work/csv" --out "$work/reference_score.json" | tee "$work/reference_score.log"
@@ -109,13 +111,14 @@ echo "== 4c. learn the port terms into the predictor blob (about 40 s)"
 echo "== 4d. the blob to upload: port terms with the torque gains and lag pinned (about 2 min)"
 # The torque gains held at the description's 1 and the torque lag at zero (the chain is the
 # motor lag alone, as the closed loop identifies it), the rate damping pulled toward zero with
-# the smallest weight of 0, 1e-4, 3e-4, 1e-3 whose blob passes the check below (chosen on the
-# training flights and simulated plants only; docs/benchmark.md "What to upload"). fit-port
-# flies it on the identified and the rigid vehicle under both laws and writes nothing if it
-# crashes one or tracks the identified one worse than the untrained prior; run.sh then goes on
-# and the upload check says so.
+# the weight the closed loop picks: of 0, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, the blob whose model,
+# flown as the plant under the onboard controller along the training flights (step 4g's
+# replay), replays them best (docs/benchmark.md "What to upload"; training flights only).
+# fit-port flies it on the identified and the rigid vehicle under both laws and writes nothing
+# if it crashes one or tracks the identified one worse than the untrained prior; run.sh then
+# goes on and the upload check says so.
 if ! "$HT" fit-port --weights "$work/pinned.hfw" --data "$work/train-raw" --horizon 50 \
-    --motor-tau-s 0.0325 --pin-torque-gains --pin-torque-lag --rate-damping-prior 1e-4 \
+    --motor-tau-s 0.0325 --pin-torque-gains --pin-torque-lag --rate-damping-prior 3e-3 \
     --flight-check "$repo/scenarios/bl-id-calm-spiral.toml" \
     --flight-survive "$repo/scenarios/bl-calm-spiral.toml" \
     --out "$work/upload.hfw" 2>&1 | tee "$work/fit-port-upload.log"; then
@@ -153,6 +156,18 @@ echo "== 4f. (host-side, does not fly) the pinned blob's measured-input response
 "$HT" fit-response --weights "$work/pinned.hfw" --data "$work/train-raw" --horizon 50 \
     --out "$work/response.json" 2>&1 | tee "$work/fit-response.log"
 
+echo "== 4g. closed-loop replay on the training flights: the readings and the blobs as plants (about 3 min)"
+# Each plant flown under our port of the onboard Mellinger along the logged reference from the
+# logged state (docs/benchmark.md "Closed-loop identification"); training flights only.
+blob_plants=()
+for blob in upload pinned flying; do
+    [ -f "$work/$blob.hfw" ] && blob_plants+=(--plant-blob "$work/$blob.hfw")
+done
+"$HT" replay --data "$work/loop" --plant "$repo/scenarios/bl-calm-spiral.toml" \
+    --plant "$repo/scenarios/bl-real-calm-spiral.toml" --plant "$repo/scenarios/bl-id-calm-spiral.toml" \
+    "${blob_plants[@]}" --blob-rotors "$repo/scenarios/bl-calm-spiral.toml" \
+    --out "$work/replay" 2>&1 | tee "$work/replay.log"
+
 echo "== 5. score (held-out melon runs, once) and the Python check on the same windows"
 # The headline: the blob that flies, alone.
 "$HT" score --weights "$work/flying.hfw" --data "$work/protocol-dataset" --horizon 50 \
@@ -180,6 +195,7 @@ fi
     --out "$work/score-adapted" 2>&1 | tee "$work/score-adapted.log"
 echo "== done: $work/score-upload/score.json (the protocol's windows; the blob to upload, alone),"
 echo "   $work/score-flying/score.json (the best predictor, alone; not for upload),"
+echo "   $work/replay/report.json (closed-loop replay of the readings and blobs, training flights),"
 echo "   $work/score-pinned/score.json (row learned+response: host-side, does not fly),"
 echo "   $work/score/score.json (host-train score on the imported test flights),"
 echo "   $work/reference_score_dataset.json (Python, the same windows),"
