@@ -18,8 +18,9 @@
 # protocol-dataset/, model.hfw (free rotation), pinned.hfw (J and g pinned to the vehicle
 # description, W learned), flying.hfw (pinned.hfw with the port terms learned: the best
 # predictor, not for upload), upload.hfw (the port terms with the torque gains and lag pinned:
-# the blob to upload), upload-check.txt, loop/ and replay/ (the closed-loop replay), response.json (the host-side measured-input response), score*/,
-# reference_score*.json and the logs. Nothing is written into the repository.
+# the blob to upload), upload-check.txt, loop/ and replay/ (the closed-loop replay),
+# response.json (the host-side measured-input response), score*/, reference_score*.json and
+# the logs. Nothing is written into the repository.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -126,6 +127,9 @@ if ! "$HT" fit-port --weights "$work/pinned.hfw" --data "$work/train-raw" --hori
     echo "upload.hfw was refused by its flight check (fit-port-upload.log): upload pinned.hfw"
 fi
 
+# The blobs the upload check (4e) flies and the replay (4g) takes as plants.
+blobs=(upload pinned flying)
+
 echo "== 4e. what to upload: each blob flown on the identified vehicle and the rigid one, both laws"
 # The closed loop identifies the real vehicle's torques as the rigid body's, with a flapping
 # moment (scenarios/bl-id-*.toml, docs/benchmark.md "Closed-loop identification"). A blob a
@@ -134,7 +138,7 @@ echo "== 4e. what to upload: each blob flown on the identified vehicle and the r
 # torque gains are the closed-loop artefact, and it is not for upload unless the table says so.
 {
     printf '%-12s %-20s %-20s %s\n' blob plant law "result (RMSE t >= 5 s)"
-    for blob in upload pinned flying; do
+    for blob in "${blobs[@]}"; do
         if [ ! -f "$work/$blob.hfw" ]; then
             printf '%-12s %-20s %-20s %s\n' "$blob.hfw" - - "not written (refused by its check)"
             continue
@@ -160,7 +164,7 @@ echo "== 4g. closed-loop replay on the training flights: the readings and the bl
 # Each plant flown under our port of the onboard Mellinger along the logged reference from the
 # logged state (docs/benchmark.md "Closed-loop identification"); training flights only.
 blob_plants=()
-for blob in upload pinned flying; do
+for blob in "${blobs[@]}"; do
     [ -f "$work/$blob.hfw" ] && blob_plants+=(--plant-blob "$work/$blob.hfw")
 done
 "$HT" replay --data "$work/loop" --plant "$repo/scenarios/bl-calm-spiral.toml" \
@@ -169,7 +173,7 @@ done
     --out "$work/replay" 2>&1 | tee "$work/replay.log"
 
 echo "== 5. score (held-out melon runs, once) and the Python check on the same windows"
-# The headline: the blob that flies, alone.
+# The best predictor, alone (the headline row; not for upload).
 "$HT" score --weights "$work/flying.hfw" --data "$work/protocol-dataset" --horizon 50 \
     --out "$work/score-flying" 2>&1 | tee "$work/score-flying.log"
 # The blob to upload, alone.
